@@ -1,0 +1,1 @@
+"""Bytes <-> packets and the units themselves: protocol codecs, transports, discovery, the emulator."""

@@ -1,0 +1,44 @@
+"""What the estimators hand to the sinks: navigation estimates with their covariance."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class NavBatch:
+    """Per-sample navigation estimates for a run of IMU samples.
+
+    Navigation frame: right-handed, z up, origin at the start position (see architecture.md).
+
+    Attributes:
+        t_s: (n,) device time, s.
+        pos_n_m: (n, 3) position of the IMU, m.
+        vel_n_mps: (n, 3) velocity, m/s.
+        quat_nb_wxyz: (n, 4) attitude, body to navigation, scalar first.
+        pos_cov_n_m2: (n, 3, 3) position covariance, m².
+        stance: (n,) True where the zero-velocity detector declared the foot still.
+        detector_stat: (n,) the detector's test statistic (dimensionless).
+        detector_threshold: scalar threshold the statistic is compared with.
+        clearance_m: (n,) height of the IMU above the floor the walk started on, m.
+        host_ns: (n,) host receive time of each sample (latency accounting).
+    """
+
+    t_s: F64
+    pos_n_m: F64
+    vel_n_mps: F64
+    quat_nb_wxyz: F64
+    pos_cov_n_m2: F64
+    stance: NDArray[np.bool_]
+    detector_stat: F64
+    detector_threshold: float
+    clearance_m: F64
+    host_ns: NDArray[np.int64]
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])

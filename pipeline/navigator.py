@@ -1,0 +1,231 @@
+"""The causal navigator: SHOE detection + error-state filter over a stream of sample batches.
+
+``Navigator.process`` takes one ``ImuBatch`` at a time and returns the estimates for every sample it
+could navigate. Until the unit has been still for ``align_s`` it buffers; it then aligns on that
+still period and navigates from its first sample, so a walk that starts still loses nothing.
+Samples before the first still period cannot be navigated and are counted, not guessed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline import eskf
+from pipeline.alignment import align_from_still
+from pipeline.detectors import ShoeParams, StreamingShoe
+from pipeline.nav_types import NavBatch
+from pipeline.profiles import UnitProfile, get_profile
+from pipeline.samples import ImuBatch
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class NavConfig:
+    """Everything the navigator needs besides the samples.
+
+    Attributes:
+        profile: the unit's noise model (``pipeline.profiles``).
+        detector: SHOE settings.
+        align_s: continuous still time needed for the initial alignment, s.
+        dt_max_s: intervals longer than this are counted as gaps in the stream, s.
+        init_pos_sigma_m, init_vel_sigma_mps: initial 1σ of position and velocity.
+        init_tilt_sigma_rad, init_yaw_sigma_rad: initial 1σ of roll/pitch and of yaw.
+        max_wait_s: how much unaligned data to keep while waiting for a still period, s.
+    """
+
+    profile: UnitProfile = field(default_factory=lambda: get_profile("mpu6500x4"))
+    detector: ShoeParams = field(default_factory=ShoeParams)
+    align_s: float = 0.5
+    dt_max_s: float = 0.05
+    init_pos_sigma_m: float = 1e-5
+    init_vel_sigma_mps: float = 0.01
+    init_tilt_sigma_rad: float = math.radians(0.5)
+    init_yaw_sigma_rad: float = math.radians(0.01)
+    max_wait_s: float = 30.0
+
+
+@dataclass
+class NavStats:
+    """Running counts a person wants to see (all samples, since the start)."""
+
+    samples_in: int = 0
+    samples_out: int = 0
+    samples_before_alignment: int = 0
+    bad_dt: int = 0
+    gaps: int = 0
+    bad_samples: int = 0
+    zero_velocity_updates: int = 0
+    aligned_at_s: float | None = None
+
+
+def filter_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float, dt_max_s: float) -> F64:
+    """Parameter vector of ``eskf.run_filter`` from a unit profile.
+
+    The per-sample process noise combines the sensor's white noise at this rate (σ = density·√rate)
+    with the profile's motion noise.
+    """
+    par = np.zeros(eskf.N_PAR)
+    par[eskf.PAR_SIG_ACC] = math.hypot(profile.acc_noise_mps2_rthz * math.sqrt(rate_hz), profile.motion_acc_mps2)
+    par[eskf.PAR_SIG_GYR] = math.hypot(profile.gyr_noise_radps_rthz * math.sqrt(rate_hz), profile.motion_gyr_radps)
+    par[eskf.PAR_BA_RW] = profile.acc_bias_rw_mps3_rthz
+    par[eskf.PAR_BG_RW] = profile.gyr_bias_rw_radps2_rthz
+    par[eskf.PAR_ZUPT] = profile.zupt_sigma_mps
+    par[eskf.PAR_ZARU] = math.hypot(profile.zaru_sigma_radps, profile.gyr_noise_radps_rthz * math.sqrt(rate_hz))
+    par[eskf.PAR_G] = gravity_mps2
+    par[eskf.PAR_DT_MAX] = dt_max_s
+    return par
+
+
+class Navigator:
+    """Causal zero-velocity-aided INS over a stream of ``ImuBatch``es.
+
+    Args:
+        config: filter, detector and profile settings.
+        rate_hz: nominal sample rate (sizes the detector window and the process noise).
+    """
+
+    def __init__(self, config: NavConfig, rate_hz: float) -> None:
+        self.config = config
+        self.rate_hz = rate_hz
+        self.detector = StreamingShoe(config.detector, rate_hz)
+        self.stats = NavStats()
+        self._pending: list[tuple[ImuBatch, F64, NDArray[np.bool_]]] = []
+        self._x: F64 | None = None
+        self._P = np.zeros((eskf.N_STATE, eskf.N_STATE))
+        self._par = np.zeros(eskf.N_PAR)
+        self._t_last = math.nan
+        self._counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+
+    @property
+    def aligned(self) -> bool:
+        return self._x is not None
+
+    @property
+    def state(self) -> F64 | None:
+        """Nominal state (16,) [p, v, q_wxyz, b_a, b_g], or None before alignment."""
+        return None if self._x is None else self._x.copy()
+
+    def process(self, batch: ImuBatch) -> NavBatch | None:
+        """Estimates for the samples of ``batch`` (and any buffered before alignment)."""
+        if len(batch) == 0:
+            return None
+        self.stats.samples_in += len(batch)
+        stat, still = self.detector.update(batch.acc_b_mps2, batch.gyr_b_radps)
+        if self._x is None:
+            self._pending.append((batch, stat, still))
+            return self._try_align()
+        return self._run(batch, stat, still)
+
+    def _try_align(self) -> NavBatch | None:
+        batch = ImuBatch.concat([b for b, _, _ in self._pending])
+        stat = np.concatenate([s for _, s, _ in self._pending])
+        still = np.concatenate([z for _, _, z in self._pending])
+        need = max(2, round(self.config.align_s * self.rate_hz))
+        start = _first_run(still, need)
+        if start < 0:
+            keep = round(self.config.max_wait_s * self.rate_hz)
+            if len(batch) > keep:  # bound memory while the unit never rests
+                drop = len(batch) - keep
+                self.stats.samples_before_alignment += drop
+                batch, stat, still = _tail(batch, drop), stat[drop:], still[drop:]
+            self._pending = [(batch, stat, still)]
+            return None
+        self._pending = []
+        self.stats.samples_before_alignment += start
+        window = slice(start, start + need)
+        al = align_from_still(batch.acc_b_mps2[window], batch.gyr_b_radps[window])
+        cfg, prof = self.config, self.config.profile
+        x = np.zeros(16)
+        x[6:10] = al.quat_nb_wxyz
+        x[13:16] = al.gyr_bias_radps
+        self._x = x
+        sig = np.concatenate(
+            [
+                np.full(3, cfg.init_pos_sigma_m),
+                np.full(3, cfg.init_vel_sigma_mps),
+                [cfg.init_tilt_sigma_rad, cfg.init_tilt_sigma_rad, cfg.init_yaw_sigma_rad],
+                np.full(3, prof.acc_bias_init_mps2),
+                np.full(3, prof.gyr_bias_init_radps),
+            ]
+        )
+        self._P = np.diag(sig**2)
+        self._par = filter_parameters(prof, self.rate_hz, al.gravity_mps2, cfg.dt_max_s)
+        self.stats.aligned_at_s = float(batch.t_s[start])
+        self._t_last = float(batch.t_s[start]) - 1.0 / self.rate_hz  # one nominal interval before
+        rest = _tail(batch, start)
+        return self._run(rest, stat[start:], still[start:])
+
+    def _run(self, batch: ImuBatch, stat: F64, still: NDArray[np.bool_]) -> NavBatch:
+        assert self._x is not None
+        n = len(batch)
+        dt = np.diff(batch.t_s, prepend=self._t_last)
+        self._t_last = float(batch.t_s[-1])
+        pos, vel = np.empty((n, 3)), np.empty((n, 3))
+        quat, pos_cov = np.empty((n, 4)), np.empty((n, 3, 3))
+        eskf.run_filter(
+            self._x,
+            self._P,
+            np.ascontiguousarray(batch.acc_b_mps2, dtype=np.float64),
+            np.ascontiguousarray(batch.gyr_b_radps, dtype=np.float64),
+            dt,
+            np.ascontiguousarray(still),
+            self._par,
+            pos,
+            vel,
+            quat,
+            pos_cov,
+            self._counters,
+        )
+        c = self._counters
+        s = self.stats
+        s.bad_dt, s.gaps = int(c[eskf.CNT_BAD_DT]), int(c[eskf.CNT_GAP])
+        s.bad_samples, s.zero_velocity_updates = int(c[eskf.CNT_BAD_SAMPLE]), int(c[eskf.CNT_UPDATES])
+        s.samples_out += n
+        return NavBatch(
+            t_s=batch.t_s,
+            pos_n_m=pos,
+            vel_n_mps=vel,
+            quat_nb_wxyz=quat,
+            pos_cov_n_m2=pos_cov,
+            stance=still,
+            detector_stat=stat,
+            detector_threshold=self.detector.threshold,
+            clearance_m=pos[:, 2].copy(),
+            host_ns=batch.host_ns,
+        )
+
+
+def _first_run(mask: NDArray[np.bool_], length: int) -> int:
+    """Index of the first run of at least ``length`` True values in ``mask``, or −1."""
+    if mask.size < length:
+        return -1
+    run = np.convolve(mask.astype(np.int64), np.ones(length, dtype=np.int64), mode="valid")
+    hits = np.flatnonzero(run == length)
+    return int(hits[0]) if hits.size else -1
+
+
+def _tail(batch: ImuBatch, start: int) -> ImuBatch:
+    return ImuBatch(
+        t_s=batch.t_s[start:],
+        acc_b_mps2=batch.acc_b_mps2[start:],
+        gyr_b_radps=batch.gyr_b_radps[start:],
+        counter=batch.counter[start:],
+        host_ns=batch.host_ns[start:],
+    )
+
+
+def navigate(
+    t_s: F64, acc_b_mps2: F64, gyr_b_radps: F64, rate_hz: float, config: NavConfig | None = None
+) -> tuple[NavBatch | None, NavStats]:
+    """Run the causal navigator over whole arrays (tests, export, evaluation)."""
+    nav = Navigator(config or NavConfig(), rate_hz)
+    n = t_s.shape[0]
+    out = nav.process(
+        ImuBatch(t_s, acc_b_mps2, gyr_b_radps, np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64))
+    )
+    return out, nav.stats

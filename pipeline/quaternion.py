@@ -1,0 +1,85 @@
+"""Quaternion and rotation helpers (scalar-first ``quat_wxyz``), compiled with numba.
+
+Conventions follow Solà, "Quaternion kinematics for the error-state Kalman filter" (2017): Hamilton
+product, ``q_nb`` rotates body vectors into the navigation frame, ``v_n = R(q_nb) v_b``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+F64 = NDArray[np.float64]
+
+
+@njit(cache=True, fastmath=False)
+def quat_mul(p: F64, q: F64) -> F64:  # pragma: no cover - compiled
+    """Hamilton product ``p ⊗ q`` of two (4,) scalar-first quaternions (Solà eq. 12)."""
+    out = np.empty(4)
+    out[0] = p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3]
+    out[1] = p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2]
+    out[2] = p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1]
+    out[3] = p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0]
+    return out
+
+
+@njit(cache=True)
+def quat_from_rotvec(rv: F64) -> F64:  # pragma: no cover - compiled
+    """Quaternion of the rotation vector ``rv`` (3,) rad: ``exp(rv/2)`` (Solà eq. 101)."""
+    angle = math.sqrt(rv[0] * rv[0] + rv[1] * rv[1] + rv[2] * rv[2])
+    out = np.empty(4)
+    if angle < 1e-9:
+        out[0] = 1.0 - angle * angle / 8.0
+        out[1] = 0.5 * rv[0]
+        out[2] = 0.5 * rv[1]
+        out[3] = 0.5 * rv[2]
+    else:
+        s = math.sin(0.5 * angle) / angle
+        out[0] = math.cos(0.5 * angle)
+        out[1] = s * rv[0]
+        out[2] = s * rv[1]
+        out[3] = s * rv[2]
+    return out
+
+
+@njit(cache=True)
+def quat_to_mat(q: F64) -> F64:  # pragma: no cover - compiled
+    """Rotation matrix (3, 3) of a unit quaternion (Solà eq. 115)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    m = np.empty((3, 3))
+    m[0, 0] = w * w + x * x - y * y - z * z
+    m[0, 1] = 2.0 * (x * y - w * z)
+    m[0, 2] = 2.0 * (x * z + w * y)
+    m[1, 0] = 2.0 * (x * y + w * z)
+    m[1, 1] = w * w - x * x + y * y - z * z
+    m[1, 2] = 2.0 * (y * z - w * x)
+    m[2, 0] = 2.0 * (x * z - w * y)
+    m[2, 1] = 2.0 * (y * z + w * x)
+    m[2, 2] = w * w - x * x - y * y + z * z
+    return m
+
+
+def quat_from_euler_zyx(roll_rad: float, pitch_rad: float, yaw_rad: float) -> F64:
+    """``q_nb`` (4,) of the z-y-x (yaw, pitch, roll) Euler sequence (Groves 2013, eq. 2.40)."""
+    cr, sr = math.cos(roll_rad / 2), math.sin(roll_rad / 2)
+    cp, sp = math.cos(pitch_rad / 2), math.sin(pitch_rad / 2)
+    cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
+    return np.array(
+        [
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        ]
+    )
+
+
+def yaw_of(quat_nb_wxyz: F64) -> F64:
+    """Heading (yaw about z up, rad) of (n, 4) or (4,) quaternions."""
+    q = np.atleast_2d(quat_nb_wxyz)
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    yaw: F64 = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return yaw

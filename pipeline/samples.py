@@ -1,0 +1,43 @@
+"""Sample batches that flow from the device layer into the estimators (struct of arrays, SI units)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class ImuBatch:
+    """A run of IMU samples in the unit's body frame.
+
+    Attributes:
+        t_s: (n,) device time in seconds, unwrapped from the unit's tick counter, increasing.
+        acc_b_mps2: (n, 3) specific force in the body frame, m/s².
+        gyr_b_radps: (n, 3) angular rate in the body frame, rad/s.
+        counter: (n,) packet counter as sent by the unit (for gap accounting).
+        host_ns: (n,) host receive time, ``time.monotonic_ns()`` of the read that completed the packet.
+    """
+
+    t_s: F64
+    acc_b_mps2: F64
+    gyr_b_radps: F64
+    counter: NDArray[np.int64]
+    host_ns: NDArray[np.int64]
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+    @staticmethod
+    def concat(batches: list[ImuBatch]) -> ImuBatch:
+        """Join batches in order into one."""
+        return ImuBatch(
+            t_s=np.concatenate([b.t_s for b in batches]),
+            acc_b_mps2=np.concatenate([b.acc_b_mps2 for b in batches]),
+            gyr_b_radps=np.concatenate([b.gyr_b_radps for b in batches]),
+            counter=np.concatenate([b.counter for b in batches]),
+            host_ns=np.concatenate([b.host_ns for b in batches]),
+        )

@@ -1,0 +1,1 @@
+"""Rerun: entity paths, the default blueprint, archetype conversion and the logger thread."""
