@@ -53,54 +53,63 @@ def shoe_statistic(acc_b_mps2: F64, gyr_b_radps: F64, window: int, p: ShoeParams
         p: noise scales and gravity.
 
     Returns:
-        (n − W + 1,) statistic; element i belongs to the window ending at sample i + W − 1.
+        (n − W + 1,) statistic; element i belongs to the window ending at sample i + W − 1. A window
+        holding a non-finite sample gets +inf (never still).
     """
     n = acc_b_mps2.shape[0]
     if n < window:
         return np.empty(0)
-    zero3 = np.zeros((1, 3))
-    csum_a = np.concatenate([zero3, np.cumsum(acc_b_mps2, axis=0)])
-    csum_a2 = np.concatenate([[0.0], np.cumsum(np.einsum("ij,ij->i", acc_b_mps2, acc_b_mps2))])
-    csum_w2 = np.concatenate([[0.0], np.cumsum(np.einsum("ij,ij->i", gyr_b_radps, gyr_b_radps))])
-    sum_a = csum_a[window:] - csum_a[:-window]
-    sum_a2 = csum_a2[window:] - csum_a2[:-window]
-    sum_w2 = csum_w2[window:] - csum_w2[:-window]
-    norm_mean_a = np.linalg.norm(sum_a, axis=1) / window
-    g = p.gravity_mps2
-    acc_term = sum_a2 - 2.0 * g * window * norm_mean_a + window * g * g
-    stat: F64 = (np.maximum(acc_term, 0.0) / p.sigma_acc_mps2**2 + sum_w2 / p.sigma_gyr_radps**2) / window
+    bad = ~(np.isfinite(acc_b_mps2).all(axis=1) & np.isfinite(gyr_b_radps).all(axis=1))
+    ref = acc_b_mps2[np.argmin(bad)] if not bad.all() else np.zeros(3)
+    # Σ|a_j − g u|² = Σ|d_j − d̄|² + W (|ā| − g)² with d = a − ref: the shift keeps the sums small
+    d = np.where(bad[:, None], 0.0, acc_b_mps2 - ref)
+    w = np.where(bad[:, None], 0.0, gyr_b_radps)
+
+    def window_sums(x: F64) -> F64:
+        c = np.concatenate([np.zeros((1, *x.shape[1:])), np.cumsum(x, axis=0)])
+        out: F64 = c[window:] - c[:-window]
+        return out
+
+    sum_d = window_sums(d)
+    sum_d2 = window_sums(np.einsum("ij,ij->i", d, d))
+    sum_w2 = window_sums(np.einsum("ij,ij->i", w, w))
+    n_bad = window_sums(bad.astype(np.float64))
+    mean_d = sum_d / window
+    spread = np.maximum(sum_d2 - window * np.einsum("ij,ij->i", mean_d, mean_d), 0.0)
+    tilt = window * (np.linalg.norm(mean_d + ref, axis=1) - p.gravity_mps2) ** 2
+    stat: F64 = ((spread + tilt) / p.sigma_acc_mps2**2 + sum_w2 / p.sigma_gyr_radps**2) / window
+    stat[n_bad > 0.5] = math.inf
     return stat
 
 
 class StreamingShoe:
-    """SHOE detector over a stream of batches; output per input sample, same length as the batch."""
+    """SHOE detector over a stream of batches; one output per input sample, whatever the batching.
+
+    The first W−1 samples of a stream use the samples seen so far as their window.
+    """
 
     def __init__(self, params: ShoeParams, rate_hz: float) -> None:
         self.params = params
         self.window = max(2, round(params.window_s * rate_hz))
         self._tail_acc = np.empty((0, 3))
         self._tail_gyr = np.empty((0, 3))
-        self._warm = False
 
     @property
     def threshold(self) -> float:
         return self.params.threshold
 
     def update(self, acc_b_mps2: F64, gyr_b_radps: F64) -> tuple[F64, NDArray[np.bool_]]:
-        """Statistic and stance flag (n,) for the batch's samples (inf until W samples were seen).
-
-        The first W−1 samples of the stream take the statistic of the first full window.
-        """
+        """Statistic and stance flag, each (n,), for the batch's samples."""
         n = acc_b_mps2.shape[0]
+        seen = self._tail_acc.shape[0]
         acc = np.concatenate([self._tail_acc, acc_b_mps2])
         gyr = np.concatenate([self._tail_gyr, gyr_b_radps])
-        stat_full = shoe_statistic(acc, gyr, self.window, self.params)
-        stat = np.full(n, math.inf)
-        if stat_full.size:
-            stat[n - min(n, stat_full.size) :] = stat_full[-min(n, stat_full.size) :]
-            if not self._warm:  # the first W−1 samples belong to the first full window
-                stat[: n - stat_full.size] = stat_full[0]
-                self._warm = True
+        stat = np.empty(n)
+        n_warm = min(n, max(0, self.window - 1 - seen))  # samples before the first full window
+        for i in range(n_warm):
+            end = seen + i + 1
+            stat[i] = shoe_statistic(acc[:end], gyr[:end], end, self.params)[0]
+        stat[n_warm:] = shoe_statistic(acc, gyr, self.window, self.params)[-(n - n_warm) :] if n > n_warm else []
         keep = self.window - 1
         self._tail_acc = acc[-keep:].copy()
         self._tail_gyr = gyr[-keep:].copy()

@@ -1,0 +1,169 @@
+"""Normal-IMU packets (commands 0x40/0x41), vectorised; device tick and packet-counter unwrapping.
+
+34-byte packet, all fields big-endian (protocol-openshoe.md sections 4.1, 4.2 and 5.3)::
+
+    AA | pkt# uint16 | N = 0x1C | ts uint32 (64 MHz ticks) | ax ay az float32 [m/s²]
+       | gx gy gz float32 [rad/s] | chk uint16
+
+Sources: ``hcarlsso/openshoe-framework:src/external_interfaces/response_functions.c`` (``normal_imu``),
+``oblu-iot/ObluScope-Java:src/io/oblu/commn/ParseNormalImu.java`` (DATA_LEN = 34, payload 28).
+Encoding many packets at once is for the emulator; decoding many payloads at once is for the host.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+TICK_HZ: Final = 64e6
+"""IMU_TS is the CPU cycle counter at 64 MHz (``conf_clock.h`` CLOCK_FREQ); it wraps every ≈67.1 s."""
+TICK_WRAP: Final = 1 << 32
+COUNTER_WRAP: Final = 1 << 16
+
+PAYLOAD_LEN: Final = 28
+PACKET_LEN: Final = PAYLOAD_LEN + 6
+
+PAYLOAD_DTYPE: Final = np.dtype([("ts", ">u4"), ("acc", ">f4", (3,)), ("gyr", ">f4", (3,))])
+"""One 28-byte payload."""
+PACKET_DTYPE: Final = np.dtype(
+    [("sync", "u1"), ("number", ">u2"), ("length", "u1"), ("payload", PAYLOAD_DTYPE), ("chk", ">u2")]
+)
+"""One whole 34-byte packet."""
+
+
+@dataclass(frozen=True, slots=True)
+class NormalImuArrays:
+    """Decoded payloads (struct of arrays).
+
+    Attributes:
+        ticks: (n,) uint32 device timestamps, 64 MHz ticks, wrapping.
+        acc_b_mps2: (n, 3) specific force, body frame, m/s².
+        gyr_b_radps: (n, 3) angular rate, body frame, rad/s.
+    """
+
+    ticks: NDArray[np.uint32]
+    acc_b_mps2: NDArray[np.float64]
+    gyr_b_radps: NDArray[np.float64]
+
+
+def decode_payloads(payloads: bytes | bytearray | memoryview) -> NormalImuArrays:
+    """Decode the concatenation of n 28-byte payloads (one ``np.frombuffer``).
+
+    Raises:
+        ValueError: the length is not a multiple of 28.
+    """
+    if len(payloads) % PAYLOAD_LEN:
+        raise ValueError(f"normal-IMU payloads are {PAYLOAD_LEN} bytes each; got {len(payloads)} bytes")
+    rec = np.frombuffer(payloads, dtype=PAYLOAD_DTYPE)
+    return NormalImuArrays(
+        ticks=rec["ts"].astype(np.uint32),
+        acc_b_mps2=rec["acc"].astype(np.float64),
+        gyr_b_radps=rec["gyr"].astype(np.float64),
+    )
+
+
+def seconds_to_ticks(t_s: NDArray[np.float64], tick0: int) -> NDArray[np.uint32]:
+    """Device ticks for sample times ``t_s`` (n,), s, with ``t_s[0]`` at tick ``tick0``, wrapped to uint32."""
+    rel = np.rint((np.asarray(t_s, dtype=np.float64) - t_s[0]) * TICK_HZ).astype(np.int64)
+    return ((rel + tick0) % TICK_WRAP).astype(np.uint32)
+
+
+def encode_packets(
+    numbers: NDArray[np.integer],
+    ticks: NDArray[np.integer],
+    acc_b_mps2: NDArray[np.floating],
+    gyr_b_radps: NDArray[np.floating],
+) -> bytes:
+    """Encode n whole packets, headers and checksums included, as one ``bytes`` of length 34·n.
+
+    Args:
+        numbers: (n,) package numbers; taken modulo 2**16.
+        ticks: (n,) timestamps in 64 MHz ticks; taken modulo 2**32.
+        acc_b_mps2: (n, 3) specific force, m/s² (sent as float32).
+        gyr_b_radps: (n, 3) angular rate, rad/s (sent as float32).
+    """
+    n = len(numbers)
+    rec = np.empty(n, dtype=PACKET_DTYPE)
+    rec["sync"] = 0xAA
+    rec["number"] = np.asarray(numbers, dtype=np.int64) % COUNTER_WRAP
+    rec["length"] = PAYLOAD_LEN
+    rec["payload"]["ts"] = np.asarray(ticks, dtype=np.int64) % TICK_WRAP
+    rec["payload"]["acc"] = acc_b_mps2
+    rec["payload"]["gyr"] = gyr_b_radps
+    raw = rec.view(np.uint8).reshape(n, PACKET_LEN)
+    rec["chk"] = raw[:, : PACKET_LEN - 2].sum(axis=1, dtype=np.uint32) & 0xFFFF
+    return rec.tobytes()
+
+
+class TickUnwrapper:
+    """Turns the wrapping uint32 64 MHz tick counter into increasing float64 seconds.
+
+    Every step is taken modulo 2**32, so the result never goes backwards and a gap shorter than one
+    wrap (≈67 s) is measured correctly. Time 0 is tick 0 of the first sample's wrap (the first sample
+    is at ``ticks[0] / 64e6`` s). ``lior88/ProjectB:Recordings/log_mimu_data.m`` unwraps the same way.
+    """
+
+    def __init__(self) -> None:
+        self._last_raw: int | None = None
+        self._last_total = 0
+        self.wraps = 0
+        """Wraps of the counter seen so far."""
+
+    def update(self, ticks: NDArray[np.integer]) -> NDArray[np.float64]:
+        """Return (n,) device time in seconds for the next ``ticks`` (n,) in stream order."""
+        raw = np.asarray(ticks, dtype=np.int64)
+        if raw.size == 0:
+            return np.empty(0, dtype=np.float64)
+        if self._last_raw is None:
+            self._last_raw = int(raw[0])
+            self._last_total = int(raw[0])
+        steps = np.diff(raw, prepend=self._last_raw)
+        wrapped = steps < 0
+        self.wraps += int(np.count_nonzero(wrapped))
+        steps[wrapped] += TICK_WRAP
+        total = self._last_total + np.cumsum(steps)
+        self._last_raw = int(raw[-1])
+        self._last_total = int(total[-1])
+        return total / TICK_HZ
+
+
+class CounterTracker:
+    """Unwraps the uint16 package number and counts lost packets, duplicates and backward steps.
+
+    A step of +1 is normal; 0 is a duplicate (a lossless-mode resend); +2..+32767 means that many
+    minus one packets were lost; a step that is negative modulo 2**16 (-32768..-1) is counted as
+    ``out_of_order``. The unwrapped counter follows the signed step.
+    """
+
+    def __init__(self) -> None:
+        self._last_raw: int | None = None
+        self._last_total = 0
+        self.lost = 0
+        self.duplicates = 0
+        self.out_of_order = 0
+
+    def update(self, numbers: NDArray[np.integer]) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+        """Track the next package numbers (n,).
+
+        Returns:
+            (unwrapped counters (n,) int64, duplicate mask (n,) — True where the step was 0).
+        """
+        raw = np.asarray(numbers, dtype=np.int64)
+        if raw.size == 0:
+            return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.bool_)
+        first = self._last_raw is None
+        prev = int(raw[0]) - 1 if self._last_raw is None else self._last_raw
+        if first:
+            self._last_total = int(raw[0]) - 1
+        steps = (np.diff(raw, prepend=prev) + COUNTER_WRAP // 2) % COUNTER_WRAP - COUNTER_WRAP // 2
+        dup = steps == 0
+        self.duplicates += int(np.count_nonzero(dup))
+        self.lost += int(np.sum(steps[steps > 1] - 1))
+        self.out_of_order += int(np.count_nonzero(steps < 0))
+        total = self._last_total + np.cumsum(steps)
+        self._last_raw = int(raw[-1])
+        self._last_total = int(total[-1])
+        return total, dup

@@ -1,0 +1,101 @@
+"""The navigator on a unit at rest: alignment, bias observability, honest covariance, bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.alignment import align_from_still
+from pipeline.errors import InputFormatError
+from pipeline.navigator import NavConfig, navigate
+from pipeline.quaternion import quat_from_euler_zyx, quat_to_mat, yaw_of
+
+RATE_HZ = 1000.0
+
+
+def _still(n: int, roll: float, pitch: float, gyr_bias: np.ndarray, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    mat_nb = quat_to_mat(quat_from_euler_zyx(roll, pitch, 0.0))
+    f_b = mat_nb.T @ np.array([0.0, 0.0, 9.80665])
+    acc = f_b + rng.normal(0, 0.02, (n, 3))
+    gyr = gyr_bias + rng.normal(0, 0.002, (n, 3))
+    return np.arange(n) / RATE_HZ, acc, gyr
+
+
+@pytest.mark.parametrize(("roll", "pitch"), [(0.0, 0.0), (0.4, -0.3), (math.pi - 0.2, 0.1)])
+def test_alignment_recovers_tilt(roll: float, pitch: float) -> None:
+    _, acc, gyr = _still(500, roll, pitch, np.zeros(3))
+    al = align_from_still(acc, gyr)
+    # gravity direction in body frame must match
+    np.testing.assert_allclose(quat_to_mat(al.quat_nb_wxyz).T[:, 2], quat_to_mat(quat_from_euler_zyx(roll, pitch, 0))[2], atol=3e-3)
+    assert abs(yaw_of(al.quat_nb_wxyz)[0]) < 1e-12
+    assert al.gravity_mps2 == pytest.approx(9.80665, abs=0.01)
+
+
+def test_alignment_rejects_wrong_units() -> None:
+    _, acc, gyr = _still(500, 0.1, 0.1, np.zeros(3))
+    with pytest.raises(InputFormatError, match="m/s²"):
+        align_from_still(acc / 9.80665, gyr)  # samples in g
+
+
+def test_rest_stays_put_and_bias_is_estimated() -> None:
+    bias = np.radians([0.3, -0.2, 0.25])  # z bias only observable through zero-angular-rate updates
+    t, acc, gyr = _still(30_000, 0.2, -0.1, bias)
+    out, stats = navigate(t, acc, gyr, RATE_HZ)
+    assert out is not None
+    assert stats.samples_out == 30_000 and stats.samples_before_alignment == 0
+    assert np.abs(out.pos_n_m).max() < 1e-3
+    assert np.abs(out.vel_n_mps[-1]).max() < 1e-3
+    assert out.stance.all()
+    sigma = np.sqrt(np.diagonal(out.pos_cov_n_m2, axis1=1, axis2=2))
+    assert (np.diff(sigma[:, 0]) >= -1e-12).all() or sigma[-1, 0] < 0.01  # grows slowly or stays small
+    assert np.all(np.linalg.eigvalsh(out.pos_cov_n_m2[-1]) > 0)
+
+
+def test_gyro_bias_is_tracked_after_alignment() -> None:
+    # alignment sees no bias; the bias then steps (e.g. warm-up) and ZARU must find it
+    # With the mpu6500x4 profile's bias random walk the steady-state gain gives a time constant of
+    # about 28 s, so after 100 s the residual of the step is a few percent.
+    t, acc, gyr = _still(105_000, 0.0, 0.0, np.zeros(3))
+    step = np.radians([0.0, 0.0, 0.2])
+    gyr[5000:] += step
+    from pipeline.navigator import Navigator
+    from pipeline.samples import ImuBatch
+
+    nav = Navigator(NavConfig(), RATE_HZ)
+    n = t.size
+    nav.process(ImuBatch(t, acc, gyr, np.arange(n), np.zeros(n, dtype=np.int64)))
+    state = nav.state
+    assert state is not None
+    np.testing.assert_allclose(state[13:16], step, atol=np.radians(0.01))
+
+
+def test_nan_samples_are_flagged_not_fatal() -> None:
+    t, acc, gyr = _still(5000, 0.0, 0.0, np.zeros(3))
+    acc[3000:3010] = np.nan
+    out, stats = navigate(t, acc, gyr, RATE_HZ)
+    assert out is not None and stats.bad_samples == 10
+    assert np.isfinite(out.pos_n_m).all()
+    assert np.abs(out.pos_n_m[-1]).max() < 1e-3
+
+
+def test_duplicate_and_gapped_timestamps_are_counted() -> None:
+    t, acc, gyr = _still(5000, 0.0, 0.0, np.zeros(3))
+    t[2000] = t[1999]  # duplicate
+    t[4000:] += 0.2  # a 200 ms gap
+    out, stats = navigate(t, acc, gyr, RATE_HZ)
+    assert out is not None
+    assert stats.bad_dt == 1 and stats.gaps == 1
+    assert np.isfinite(out.pos_n_m).all()
+
+
+def test_no_still_period_means_no_estimates() -> None:
+    rng = np.random.default_rng(0)
+    n = 3000
+    acc = np.array([0, 0, 9.8]) + rng.normal(0, 4.0, (n, 3))
+    gyr = rng.normal(0, 2.0, (n, 3))
+    out, stats = navigate(np.arange(n) / RATE_HZ, acc, gyr, RATE_HZ)
+    assert out is None
+    assert stats.aligned_at_s is None and stats.samples_out == 0
