@@ -31,25 +31,43 @@ def build_parser() -> argparse.ArgumentParser:
     from device.emulator.imu_errors import IMU_GRADES
     from pipeline.profiles import PROFILES
 
-    parser = argparse.ArgumentParser(prog="footnav", description="Foot-mounted inertial navigation, live in Rerun.")
+    parser = argparse.ArgumentParser(
+        prog="footnav", description="Foot-mounted inertial navigation, live in Rerun."
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug detail to stderr")
     sub = parser.add_subparsers(dest="command", required=True)
 
     demo = sub.add_parser("demo", help="run everything against the built-in emulated shoe (no hardware)")
-    demo.add_argument("--path", choices=PATHS, default="rectangle", help="walking path (default: rectangle, 18 × 9 m)")
-    demo.add_argument("--duration", type=_positive, default=60.0, metavar="S", help="walk duration in seconds (default 60)")
-    demo.add_argument("--speed", type=_positive, default=1.4, metavar="M/S", help="walking speed, 1.2-1.8 m/s (default 1.4)")
-    demo.add_argument("--grade", choices=sorted(IMU_GRADES), default="mpu6500x4", help="emulated sensor grade")
+    demo.add_argument(
+        "--path", choices=PATHS, default="rectangle", help="walking path (default: rectangle, 18 × 9 m)"
+    )
+    demo.add_argument(
+        "--duration", type=_positive, default=60.0, metavar="S", help="walk duration in seconds (default 60)"
+    )
+    demo.add_argument(
+        "--speed", type=_positive, default=1.4, metavar="M/S", help="walking speed, 1.2-1.8 m/s (default 1.4)"
+    )
+    demo.add_argument(
+        "--grade", choices=sorted(IMU_GRADES), default="mpu6500x4", help="emulated sensor grade"
+    )
     demo.add_argument("--save", type=Path, metavar="FILE.rrd", help="also write the recording to this file")
     demo.add_argument("--no-viewer", action="store_true", help="do not open a viewer (save only)")
-    demo.add_argument("--pace", type=_pace, default=1.0, metavar="1x|Nx|max", help="emulator speed (default real time)")
+    demo.add_argument(
+        "--pace", type=_pace, default=1.0, metavar="1x|Nx|max", help="emulator speed (default real time)"
+    )
     demo.add_argument("--seed", type=int, default=1, help="random seed of the emulated sensor errors")
 
     live = sub.add_parser("live", help="navigate a connected unit (USB serial)")
     live.add_argument("--port", required=True, help="serial port of the unit, e.g. /dev/ttyACM0")
     live.add_argument("--profile", choices=sorted(PROFILES), default="mpu6500x4", help="unit noise profile")
-    live.add_argument("--rate-divider", type=int, default=0, choices=range(7), metavar="K",
-                      help="output every 2**K samples of the 1 kHz base rate (default 0: 1 kHz)")
+    live.add_argument(
+        "--rate-divider",
+        type=int,
+        default=0,
+        choices=range(7),
+        metavar="K",
+        help="output every 2**K samples of the 1 kHz base rate (default 0: 1 kHz)",
+    )
     live.add_argument("--save", type=Path, metavar="FILE.rrd", help="also write the recording to this file")
     live.add_argument("--no-viewer", action="store_true", help="do not open a viewer (save only)")
     return parser
@@ -93,7 +111,9 @@ def _live(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``footnav`` console script."""
     args = build_parser().parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="footnav: %(message)s")
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.WARNING, format="footnav: %(message)s"
+    )
     try:
         if args.command == "demo":
             from app.demo import DemoOptions, run_demo

@@ -22,12 +22,19 @@ from device.emulator.imu_errors import IMU_GRADES, corrupt
 from device.emulator.pty_server import PtyShoeServer
 from pipeline.navigator import NavConfig, Navigator
 from pipeline.profiles import get_profile
+from pipeline.runner import NavSink
 from views.logger import RerunLogger
 from views.sinks import choose_sinks
 
 PATHS = ("rectangle", "line", "figure8", "stairs")
 # the profile the filter assumes for each emulated sensor grade
-PROFILE_OF_GRADE = {"mpu6500x4": "mpu6500x4", "adis16367": "adis16367", "icm20948": "generic", "gx3": "gx3", "ideal": "mpu6500x4"}
+PROFILE_OF_GRADE = {
+    "mpu6500x4": "mpu6500x4",
+    "adis16367": "adis16367",
+    "icm20948": "generic",
+    "gx3": "gx3",
+    "ideal": "mpu6500x4",
+}
 
 
 @dataclass(frozen=True)
@@ -73,7 +80,7 @@ def summarise(truth: GaitTruth, result: SerialSessionResult, samples_navigated: 
     if nav is None or result.first_counter is None or result.link is None:
         return None
     # counters run one per sample at the 1 kHz base rate; the demo streams every sample
-    last_index = int(round(nav.t_s[-1] * truth.rate_hz))
+    last_index = round(float(nav.t_s[-1]) * truth.rate_hz)
     error = float(np.linalg.norm(nav.pos_n_m[-1] - truth.pos_n_m[last_index]))
     return DemoSummary(truth.distance_m, error, truth.t_s.size, samples_navigated, result.link.lost_packets)
 
@@ -82,8 +89,12 @@ def run_demo(opts: DemoOptions) -> int:
     """Run the demo; returns the process exit code."""
     if opts.path not in PATHS:
         raise ValueError(f"unknown path {opts.path!r}; choose one of {', '.join(PATHS)}")
-    truth = simulate_walk(opts.path, opts.duration_s, rate_hz=1000.0, speed_mps=opts.speed_mps, seed=opts.seed)
-    acc, gyr, _ = corrupt(truth.acc_b_mps2, truth.gyr_b_radps, truth.rate_hz, IMU_GRADES[opts.grade], seed=opts.seed)
+    truth = simulate_walk(
+        opts.path, opts.duration_s, rate_hz=1000.0, speed_mps=opts.speed_mps, seed=opts.seed
+    )
+    acc, gyr, _ = corrupt(
+        truth.acc_b_mps2, truth.gyr_b_radps, truth.rate_hz, IMU_GRADES[opts.grade], seed=opts.seed
+    )
     print(
         f"footnav demo: emulated shoe ({opts.grade}), {opts.path} walk, {opts.duration_s:.0f} s at "
         f"{opts.speed_mps:.1f} m/s, 1 kHz over a pseudo-terminal",
@@ -98,7 +109,7 @@ def run_demo(opts: DemoOptions) -> int:
     config = NavConfig(profile=get_profile(PROFILE_OF_GRADE[opts.grade]))
     navigator = Navigator(config, rate_hz=truth.rate_hz)
     status = StatusLine()
-    sinks_nav = [status] if logger is None else [logger.put, status]
+    sinks_nav: list[NavSink] = [status] if logger is None else [logger.put, status]
     server = PtyShoeServer(truth.t_s, acc, gyr, speed=opts.realtime, record=False)
     interrupted = False
     result = SerialSessionResult()

@@ -6,8 +6,9 @@ import asyncio
 import contextlib
 import dataclasses
 import logging
-from collections.abc import AsyncIterator, Callable, Sequence
+from collections.abc import AsyncGenerator, AsyncIterator, Callable, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 from app.status import StatusLine
 from device.unit import LinkStats, OpenShoeUnit
@@ -43,7 +44,7 @@ async def _session_samples(
     """The unit's batches with time rebased to the session's first sample; ends after
     ``expect_samples`` or when ``source_done()`` and the link has gone quiet."""
     received = 0
-    batches = unit.imu_batches()
+    batches = cast(AsyncGenerator[ImuBatch, None], unit.imu_batches())
     async with contextlib.aclosing(batches):
         while expect_samples is None or received < expect_samples:
             try:

@@ -18,7 +18,9 @@ class StatusLine:
     On a terminal the line is rewritten in place; otherwise a line is printed every ``log_period_s``.
     """
 
-    def __init__(self, stream: TextIO = sys.stderr, period_s: float = 0.25, log_period_s: float = 10.0) -> None:
+    def __init__(
+        self, stream: TextIO = sys.stderr, period_s: float = 0.25, log_period_s: float = 10.0
+    ) -> None:
         self.stream = stream
         self.tty = stream.isatty()
         self.period_s = period_s if self.tty else log_period_s

@@ -59,11 +59,12 @@ def shoe_statistic(acc_b_mps2: F64, gyr_b_radps: F64, window: int, p: ShoeParams
     n = acc_b_mps2.shape[0]
     if n < window:
         return np.empty(0)
-    bad = ~(np.isfinite(acc_b_mps2).all(axis=1) & np.isfinite(gyr_b_radps).all(axis=1))
+    finite = np.isfinite(acc_b_mps2).all(axis=1) & np.isfinite(gyr_b_radps).all(axis=1)
+    bad = np.logical_not(finite)
     ref = acc_b_mps2[np.argmin(bad)] if not bad.all() else np.zeros(3)
     # Σ|a_j − g u|² = Σ|d_j − d̄|² + W (|ā| − g)² with d = a − ref: the shift keeps the sums small
-    d = np.where(bad[:, None], 0.0, acc_b_mps2 - ref)
-    w = np.where(bad[:, None], 0.0, gyr_b_radps)
+    d: F64 = np.where(bad[:, None], 0.0, acc_b_mps2 - ref)
+    w: F64 = np.where(bad[:, None], 0.0, gyr_b_radps)
 
     def window_sums(x: F64) -> F64:
         c = np.concatenate([np.zeros((1, *x.shape[1:])), np.cumsum(x, axis=0)])
@@ -109,7 +110,9 @@ class StreamingShoe:
         for i in range(n_warm):
             end = seen + i + 1
             stat[i] = shoe_statistic(acc[:end], gyr[:end], end, self.params)[0]
-        stat[n_warm:] = shoe_statistic(acc, gyr, self.window, self.params)[-(n - n_warm) :] if n > n_warm else []
+        stat[n_warm:] = (
+            shoe_statistic(acc, gyr, self.window, self.params)[-(n - n_warm) :] if n > n_warm else []
+        )
         keep = self.window - 1
         self._tail_acc = acc[-keep:].copy()
         self._tail_gyr = gyr[-keep:].copy()

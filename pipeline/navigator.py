@@ -70,12 +70,18 @@ def filter_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float,
     with the profile's motion noise.
     """
     par = np.zeros(eskf.N_PAR)
-    par[eskf.PAR_SIG_ACC] = math.hypot(profile.acc_noise_mps2_rthz * math.sqrt(rate_hz), profile.motion_acc_mps2)
-    par[eskf.PAR_SIG_GYR] = math.hypot(profile.gyr_noise_radps_rthz * math.sqrt(rate_hz), profile.motion_gyr_radps)
+    par[eskf.PAR_SIG_ACC] = math.hypot(
+        profile.acc_noise_mps2_rthz * math.sqrt(rate_hz), profile.motion_acc_mps2
+    )
+    par[eskf.PAR_SIG_GYR] = math.hypot(
+        profile.gyr_noise_radps_rthz * math.sqrt(rate_hz), profile.motion_gyr_radps
+    )
     par[eskf.PAR_BA_RW] = profile.acc_bias_rw_mps3_rthz
     par[eskf.PAR_BG_RW] = profile.gyr_bias_rw_radps2_rthz
     par[eskf.PAR_ZUPT] = profile.zupt_sigma_mps
-    par[eskf.PAR_ZARU] = math.hypot(profile.zaru_sigma_radps, profile.gyr_noise_radps_rthz * math.sqrt(rate_hz))
+    par[eskf.PAR_ZARU] = math.hypot(
+        profile.zaru_sigma_radps, profile.gyr_noise_radps_rthz * math.sqrt(rate_hz)
+    )
     par[eskf.PAR_G] = gravity_mps2
     par[eskf.PAR_DT_MAX] = dt_max_s
     return par

@@ -17,7 +17,7 @@ from pipeline.nav_types import NavBatch
 from pipeline.navigator import Navigator
 from pipeline.samples import ImuBatch
 
-NavSink = Callable[[NavBatch], None]
+NavSink = Callable[[NavBatch], object]  # return values are ignored
 
 
 async def run_pipeline(

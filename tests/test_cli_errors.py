@@ -9,17 +9,21 @@ import termios
 import tty
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from device.emulator.pty_server import PtyShoeServer
-
-import numpy as np
 
 
 def _footnav(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "DISPLAY": "", "WAYLAND_DISPLAY": ""}
     return subprocess.run(
-        [sys.executable, "-m", "app", *args], capture_output=True, text=True, timeout=timeout, env=env
+        [sys.executable, "-m", "app", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=env,
+        check=False,
     )
 
 

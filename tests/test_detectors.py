@@ -33,7 +33,9 @@ def _walkish(n: int, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
 def test_statistic_matches_definition() -> None:
     acc, gyr = _walkish(1200)
     p = ShoeParams()
-    np.testing.assert_allclose(shoe_statistic(acc, gyr, 7, p), _shoe_by_definition(acc, gyr, 7, p), rtol=1e-7, atol=1e-6)
+    np.testing.assert_allclose(
+        shoe_statistic(acc, gyr, 7, p), _shoe_by_definition(acc, gyr, 7, p), rtol=1e-7, atol=1e-6
+    )
 
 
 @pytest.mark.parametrize("chunk", [1, 7, 64, 5000])

@@ -29,7 +29,9 @@ def test_alignment_recovers_tilt(roll: float, pitch: float) -> None:
     _, acc, gyr = _still(500, roll, pitch, np.zeros(3))
     al = align_from_still(acc, gyr)
     # gravity direction in body frame must match
-    np.testing.assert_allclose(quat_to_mat(al.quat_nb_wxyz).T[:, 2], quat_to_mat(quat_from_euler_zyx(roll, pitch, 0))[2], atol=3e-3)
+    np.testing.assert_allclose(
+        quat_to_mat(al.quat_nb_wxyz).T[:, 2], quat_to_mat(quat_from_euler_zyx(roll, pitch, 0))[2], atol=3e-3
+    )
     assert abs(yaw_of(al.quat_nb_wxyz)[0]) < 1e-12
     assert al.gravity_mps2 == pytest.approx(9.80665, abs=0.01)
 
