@@ -1,0 +1,149 @@
+"""IMU error model: noise levels per grade, biases, the Gauss-Markov drift, determinism."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from device.emulator.imu_errors import IMU_GRADES, ImuGrade, corrupt, gauss_markov
+
+NOISY_GRADES = [name for name in IMU_GRADES if name != "ideal"]
+
+
+@pytest.mark.parametrize("name", NOISY_GRADES)
+@pytest.mark.parametrize("rate_hz", [1000.0, 819.2])
+def test_white_noise_std_matches_density_times_root_half_rate(name: str, rate_hz: float) -> None:
+    grade = IMU_GRADES[name]
+    zeros = np.zeros((100_000, 3))
+    acc, gyr, applied = corrupt(zeros, zeros, rate_hz, grade, seed=11)
+    acc_sigma = grade.acc_noise_density_mps2_rthz * math.sqrt(rate_hz / 2)
+    gyr_sigma = grade.gyr_noise_density_radps_rthz * math.sqrt(rate_hz / 2)
+    assert grade.acc_noise_sigma_mps2(rate_hz) == pytest.approx(acc_sigma)
+    np.testing.assert_allclose((acc - applied.acc_bias_b_mps2).std(axis=0), acc_sigma, rtol=0.02)
+    np.testing.assert_allclose((gyr - applied.gyr_bias_b_radps).std(axis=0), gyr_sigma, rtol=0.02)
+    np.testing.assert_allclose(
+        np.abs(applied.acc_noise_b_mps2.mean(axis=0)), 0.0, atol=5 * acc_sigma / math.sqrt(len(zeros))
+    )
+
+
+def test_measurement_is_truth_plus_bias_plus_noise() -> None:
+    rng = np.random.default_rng(0)
+    truth_acc = rng.normal(size=(5000, 3))
+    truth_gyr = rng.normal(size=(5000, 3))
+    acc, gyr, applied = corrupt(truth_acc, truth_gyr, 1000.0, "mpu6500x4", seed=2)
+    np.testing.assert_allclose(
+        acc, truth_acc + applied.acc_bias_b_mps2 + applied.acc_noise_b_mps2, rtol=0, atol=1e-15
+    )
+    np.testing.assert_allclose(
+        gyr, truth_gyr + applied.gyr_bias_b_radps + applied.gyr_noise_b_radps, rtol=0, atol=1e-15
+    )
+    assert applied.acc_bias_b_mps2.shape == applied.gyr_bias_b_radps.shape == (5000, 3)
+
+
+def test_adis16367_noise_integrates_to_the_datasheet_random_walks() -> None:
+    grade = IMU_GRADES["adis16367"]
+    rate_hz = 1000.0
+    zeros = np.zeros((600_000, 3))
+    _, _, applied = corrupt(zeros, zeros, rate_hz, grade, seed=5)
+    # Angle / velocity gained over each 1 s window has std N·√(1 s): ARW 2°/√h, VRW 0.2 m/s/√h.
+    angle_rad = applied.gyr_noise_b_radps.reshape(-1, 1000, 3).sum(axis=1) / rate_hz
+    dvel_mps = applied.acc_noise_b_mps2.reshape(-1, 1000, 3).sum(axis=1) / rate_hz
+    assert angle_rad.std() == pytest.approx(math.radians(2.0) / 60.0, rel=0.06)
+    assert dvel_mps.std() == pytest.approx(0.2 / 60.0, rel=0.06)
+
+
+def test_turn_on_bias_spread_across_seeds_matches_the_grade() -> None:
+    grade = IMU_GRADES["icm20948"]
+    one = np.zeros((1, 3))
+    acc_b0 = []
+    gyr_b0 = []
+    for seed in range(400):
+        _, _, applied = corrupt(one, one, 1000.0, grade, seed=seed)
+        acc_b0.append(applied.acc_turn_on_bias_b_mps2)
+        gyr_b0.append(applied.gyr_turn_on_bias_b_radps)
+    assert np.std(acc_b0) == pytest.approx(grade.acc_bias_sigma_mps2, rel=0.08)
+    assert np.std(gyr_b0) == pytest.approx(grade.gyr_bias_sigma_radps, rel=0.08)
+
+
+def test_bias_series_is_turn_on_plus_a_bounded_drift() -> None:
+    grade = IMU_GRADES["gx3"]
+    zeros = np.zeros((60_000, 3))
+    _, _, applied = corrupt(zeros, zeros, 1000.0, grade, seed=9)
+    drift = applied.gyr_bias_b_radps - applied.gyr_turn_on_bias_b_radps
+    # 60 s of a 100 s-correlated drift: slow (tiny sample-to-sample steps) and of the datasheet size.
+    step_sigma = grade.gyr_bias_instability_radps * math.sqrt(2.0 / (1000.0 * grade.bias_correlation_time_s))
+    assert np.diff(drift, axis=0).std() == pytest.approx(step_sigma, rel=0.05)
+    assert np.abs(drift).max() < 6 * grade.gyr_bias_instability_radps
+    assert np.abs(drift).max() > 0.05 * grade.gyr_bias_instability_radps
+
+
+def test_gauss_markov_has_the_stationary_std_and_correlation() -> None:
+    sigma, tau_s, rate_hz = 2.0, 0.05, 1000.0
+    seq = gauss_markov(400_000, sigma, tau_s, rate_hz, rng=np.random.default_rng(1), n_axes=2)
+    np.testing.assert_allclose(seq.std(axis=0), sigma, rtol=0.03)
+    lag1 = [np.corrcoef(seq[:-1, j], seq[1:, j])[0, 1] for j in range(2)]
+    np.testing.assert_allclose(lag1, math.exp(-1.0 / (rate_hz * tau_s)), atol=1e-3)
+    lag_tau = [np.corrcoef(seq[:-50, j], seq[50:, j])[0, 1] for j in range(2)]
+    np.testing.assert_allclose(lag_tau, math.exp(-1.0), atol=0.03)
+
+
+def test_gauss_markov_matches_the_plain_recursion() -> None:
+    n, sigma, tau_s, rate_hz = 3000, 1.5, 0.02, 1000.0  # spans several closed-form blocks
+    fast = gauss_markov(n, sigma, tau_s, rate_hz, rng=np.random.default_rng(4), n_axes=3)
+    rng = np.random.default_rng(4)
+    phi = math.exp(-1.0 / (rate_hz * tau_s))
+    drive = sigma * math.sqrt(1.0 - phi**2) * rng.standard_normal((n, 3))
+    slow = np.empty((n, 3))
+    slow[0] = sigma * rng.standard_normal(3)
+    for k in range(1, n):
+        slow[k] = phi * slow[k - 1] + drive[k - 1]
+    np.testing.assert_allclose(fast, slow, rtol=1e-9, atol=1e-12)
+
+
+def test_same_seed_same_errors_other_seed_other_errors() -> None:
+    zeros = np.zeros((2000, 3))
+    a = corrupt(zeros, zeros, 819.2, "mpu6500x4", seed=1)
+    b = corrupt(zeros, zeros, 819.2, "mpu6500x4", seed=1)
+    c = corrupt(zeros, zeros, 819.2, "mpu6500x4", seed=2)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
+    np.testing.assert_array_equal(a[2].gyr_bias_b_radps, b[2].gyr_bias_b_radps)
+    assert not np.array_equal(a[0], c[0])
+
+
+def test_grade_by_name_equals_grade_object() -> None:
+    zeros = np.zeros((100, 3))
+    by_name = corrupt(zeros, zeros, 1000.0, "adis16367", seed=0)
+    by_object = corrupt(zeros, zeros, 1000.0, IMU_GRADES["adis16367"], seed=0)
+    np.testing.assert_array_equal(by_name[0], by_object[0])
+
+
+def test_ideal_grade_returns_the_truth() -> None:
+    rng = np.random.default_rng(3)
+    truth_acc = rng.normal(size=(1000, 3))
+    truth_gyr = rng.normal(size=(1000, 3))
+    acc, gyr, applied = corrupt(truth_acc, truth_gyr, 1000.0, "ideal", seed=0)
+    np.testing.assert_array_equal(acc, truth_acc)
+    np.testing.assert_array_equal(gyr, truth_gyr)
+    assert not applied.acc_bias_b_mps2.any()
+
+
+def test_grades_are_ordered_sensibly() -> None:
+    mimu, adis = IMU_GRADES["mpu6500x4"], IMU_GRADES["adis16367"]
+    # Four averaged MPU-6500s: half of one sensor's 0.01 °/s/√Hz and 300 µg/√Hz.
+    assert mimu.gyr_noise_density_radps_rthz == pytest.approx(math.radians(0.005))
+    assert mimu.acc_noise_density_mps2_rthz == pytest.approx(150e-6 * 9.80665)
+    assert adis.gyr_bias_instability_radps == pytest.approx(math.radians(0.007))
+    assert all(isinstance(g, ImuGrade) and g.name == name for name, g in IMU_GRADES.items())
+
+
+def test_bad_inputs_are_refused() -> None:
+    zeros = np.zeros((10, 3))
+    with pytest.raises(ValueError, match="unknown IMU grade"):
+        corrupt(zeros, zeros, 1000.0, "navigation-grade", seed=0)
+    with pytest.raises(ValueError, match=r"\(n, 3\)"):
+        corrupt(zeros, np.zeros((9, 3)), 1000.0, "ideal", seed=0)
+    with pytest.raises(ValueError, match="rate"):
+        corrupt(zeros, zeros, 0.0, "ideal", seed=0)
