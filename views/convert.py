@@ -1,0 +1,231 @@
+"""Pure conversions from :class:`pipeline.nav_types.NavBatch` to Rerun columns.
+
+The numeric part (:func:`nav_arrays`) is plain numpy and testable without Rerun; :func:`nav_columns`
+wraps it into ``(entity_path, columns)`` pairs for ``RecordingStream.send_columns``, all sharing the
+one ``imu_time`` index. Quaternions are scalar-first (``wxyz``) everywhere in footnav; Rerun's
+``xyzw`` order is produced here and only here (:func:`quat_wxyz_to_xyzw`, :func:`rotmat_to_quat_xyzw`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import rerun as rr
+from numpy.typing import NDArray
+
+from pipeline.nav_types import NavBatch
+from views.paths import TIMELINE, FootPaths
+
+F32 = NDArray[np.float32]
+F64 = NDArray[np.float64]
+
+DEFAULT_SIGMA_SCALE = 3.0
+"""Covariance ellipsoids are drawn at this many standard deviations."""
+
+STANCE_CLASS = 1
+SWING_CLASS = 0
+STANCE_STATE = "stance"
+SWING_STATE = "swing"
+
+SendColumns = tuple[str, rr.TimeColumn, rr.ComponentColumnList]
+"""``(entity_path, index, columns)``: the arguments of one ``send_columns`` call."""
+
+
+def quat_wxyz_to_xyzw(quat_wxyz: F64) -> F64:
+    """Reorder scalar-first quaternions ``(..., 4)`` to Rerun's scalar-last ``(..., 4)``."""
+    return np.ascontiguousarray(np.roll(np.asarray(quat_wxyz, dtype=np.float64), -1, axis=-1))
+
+
+def rotmat_to_quat_xyzw(mat: F64) -> F64:
+    """Rotation matrices ``(..., 3, 3)`` to unit quaternions ``(..., 4)`` in ``xyzw`` order.
+
+    Shepperd's method: each quaternion is computed from its largest component, so rotations near
+    180° (common for eigenvector bases, whose signs are arbitrary) come out as accurately as small ones.
+    """
+    mat = np.asarray(mat, dtype=np.float64)
+    m = mat.reshape(-1, 3, 3)
+    m00, m11, m22 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
+    trace = m00 + m11 + m22
+    # 4·w², 4·x², 4·y², 4·z² (up to a common offset); pick the largest per matrix.
+    cand = np.stack([trace, m00, m11, m22], axis=-1)
+    choice = np.argmax(cand, axis=-1)
+    r21, r12, r02, r20, r10, r01 = m[:, 2, 1], m[:, 1, 2], m[:, 0, 2], m[:, 2, 0], m[:, 1, 0], m[:, 0, 1]
+    # (signs of m00, m11, m22 in 4·c²) and the other three components times 4·c, for c = w, x, y, z
+    cases = (
+        ((1, 1, 1), (r21 - r12, r02 - r20, r10 - r01), (0, 1, 2, 3)),  # w largest: [w | x, y, z]
+        ((1, -1, -1), (r01 + r10, r02 + r20, r21 - r12), (1, 2, 3, 0)),  # x largest: [x | y, z, w]
+        ((-1, 1, -1), (r01 + r10, r12 + r21, r02 - r20), (2, 1, 3, 0)),  # y largest: [y | x, z, w]
+        ((-1, -1, 1), (r02 + r20, r12 + r21, r10 - r01), (3, 1, 2, 0)),  # z largest: [z | x, y, w]
+    )
+    w_x_y_z = np.empty((m.shape[0], 4))  # scalar-first scratch, reordered to xyzw at the end
+    for k, ((a, b, c), others, slots) in enumerate(cases):
+        sel = choice == k
+        s = 2.0 * np.sqrt(np.maximum(1.0 + a * m00[sel] + b * m11[sel] + c * m22[sel], 1e-300))  # 4·|c|
+        w_x_y_z[sel, slots[0]] = s / 4.0
+        for slot, val in zip(slots[1:], others, strict=True):
+            w_x_y_z[sel, slot] = val[sel] / s
+    out = np.roll(w_x_y_z, -1, axis=-1)
+    out /= np.linalg.norm(out, axis=-1, keepdims=True)
+    return out.reshape(*mat.shape[:-2], 4)
+
+
+def cov_ellipsoids(cov: F64, *, sigma_scale: float = DEFAULT_SIGMA_SCALE) -> tuple[F64, F64]:
+    """Ellipsoid half-sizes and orientations of 3×3 covariances.
+
+    Args:
+        cov: (n, 3, 3) covariance matrices (symmetrised here; non-finite ones become zero-size).
+        sigma_scale: half-sizes are ``sigma_scale * sqrt(eigenvalue)``.
+
+    Returns:
+        half_sizes (n, 3) along the ellipsoid's own axes, and quat_xyzw (n, 4) rotating those axes
+        into the covariance's frame, so that ``R diag(h²) Rᵀ = sigma_scale² · cov``.
+    """
+    p = np.asarray(cov, dtype=np.float64)
+    p = 0.5 * (p + np.swapaxes(p, -1, -2))
+    bad = ~np.isfinite(p).all(axis=(-1, -2))
+    if bad.any():
+        p = p.copy()
+        p[bad] = 0.0
+    evals, evecs = np.linalg.eigh(p)
+    # eigh gives an orthonormal basis that may be a reflection; make it a rotation.
+    flip = np.linalg.det(evecs) < 0
+    evecs[flip, :, 2] *= -1.0
+    half_sizes = sigma_scale * np.sqrt(np.clip(evals, 0.0, None))
+    return half_sizes, rotmat_to_quat_xyzw(evecs)
+
+
+def pos_sigmas(cov: F64) -> F64:
+    """Standard deviations ``[σx, σy, σz, sqrt(trace)]`` (n, 4), m, from (n, 3, 3) covariances."""
+    diag = np.clip(np.diagonal(np.asarray(cov, dtype=np.float64), axis1=-2, axis2=-1), 0.0, None)
+    return np.concatenate([np.sqrt(diag), np.sqrt(diag.sum(axis=-1, keepdims=True))], axis=-1)
+
+
+def concat_batches(batches: Sequence[NavBatch]) -> NavBatch:
+    """Join consecutive batches into one (the detector threshold of the last batch is kept)."""
+    if len(batches) == 1:
+        return batches[0]
+    if not batches:
+        raise ValueError("concat_batches needs at least one NavBatch")
+    return NavBatch(
+        t_s=np.concatenate([b.t_s for b in batches]),
+        pos_n_m=np.concatenate([b.pos_n_m for b in batches]),
+        vel_n_mps=np.concatenate([b.vel_n_mps for b in batches]),
+        quat_nb_wxyz=np.concatenate([b.quat_nb_wxyz for b in batches]),
+        pos_cov_n_m2=np.concatenate([b.pos_cov_n_m2 for b in batches]),
+        stance=np.concatenate([b.stance for b in batches]),
+        detector_stat=np.concatenate([b.detector_stat for b in batches]),
+        detector_threshold=batches[-1].detector_threshold,
+        clearance_m=np.concatenate([b.clearance_m for b in batches]),
+        host_ns=np.concatenate([b.host_ns for b in batches]),
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class NavArrays:
+    """Column arrays for one batch of n samples, in the dtypes and orders Rerun takes.
+
+    Attributes:
+        t_s: (n,) device time, s.
+        pos: (n, 3) float32 IMU position, m (track points, pose translation, ellipsoid centres).
+        class_ids: (n,) uint16, 1 = stance, 0 = swing.
+        quat_xyzw: (n, 4) float32 attitude body to navigation.
+        cov_half_sizes: (n, 3) float32 k-sigma ellipsoid half-sizes, m.
+        cov_quat_xyzw: (n, 4) float32 ellipsoid orientation in the navigation frame.
+        stance: (n,) float64 0.0 / 1.0.
+        clearance: (n,) float64, m.
+        pos_sigma: (n, 4) float64 ``[σx, σy, σz, sqrt(trace)]``, m.
+        detector: (n, 2) float64 ``[statistic, threshold]``.
+    """
+
+    t_s: F64
+    pos: F32
+    class_ids: NDArray[np.uint16]
+    quat_xyzw: F32
+    cov_half_sizes: F32
+    cov_quat_xyzw: F32
+    stance: F64
+    clearance: F64
+    pos_sigma: F64
+    detector: F64
+
+
+def nav_arrays(nav: NavBatch, *, sigma_scale: float = DEFAULT_SIGMA_SCALE) -> NavArrays:
+    """Convert a NavBatch of n samples to :class:`NavArrays` (pure numpy)."""
+    n = len(nav)
+    half_sizes, cov_q = cov_ellipsoids(nav.pos_cov_n_m2, sigma_scale=sigma_scale)
+    stance = np.asarray(nav.stance, dtype=bool)
+    return NavArrays(
+        t_s=np.asarray(nav.t_s, dtype=np.float64),
+        pos=np.asarray(nav.pos_n_m, dtype=np.float32),
+        class_ids=np.where(stance, STANCE_CLASS, SWING_CLASS).astype(np.uint16),
+        quat_xyzw=quat_wxyz_to_xyzw(nav.quat_nb_wxyz).astype(np.float32),
+        cov_half_sizes=half_sizes.astype(np.float32),
+        cov_quat_xyzw=cov_q.astype(np.float32),
+        stance=stance.astype(np.float64),
+        clearance=np.asarray(nav.clearance_m, dtype=np.float64),
+        pos_sigma=pos_sigmas(nav.pos_cov_n_m2),
+        detector=np.stack(
+            [np.asarray(nav.detector_stat, dtype=np.float64), np.full(n, float(nav.detector_threshold))],
+            axis=-1,
+        ),
+    )
+
+
+def stance_transitions(stance: NDArray[np.bool_], previous: bool | None) -> NDArray[np.intp]:
+    """Indices (k,) where the stance flag differs from the sample before (or from ``previous``)."""
+    s = np.asarray(stance, dtype=bool)
+    if s.size == 0:
+        return np.zeros(0, dtype=np.intp)
+    change = np.empty(s.shape, dtype=bool)
+    change[0] = previous is None or bool(s[0]) != previous
+    change[1:] = s[1:] != s[:-1]
+    return np.flatnonzero(change)
+
+
+def time_column(t_s: F64) -> rr.TimeColumn:
+    """The ``imu_time`` index for ``send_columns`` (duration, seconds)."""
+    return rr.TimeColumn(TIMELINE, duration=np.asarray(t_s, dtype=np.float64))
+
+
+def nav_columns(
+    arrays: NavArrays, paths: FootPaths, *, ellipsoid_every: int = 1, first_index: int = 0
+) -> list[SendColumns]:
+    """``(entity, index, columns)`` triples for ``send_columns``, one per displayed entity.
+
+    Every sample is logged for track, pose, stance, clearance, sigma and detector. The ellipsoid is
+    logged for samples whose running index (``first_index`` + row) is a multiple of
+    ``ellipsoid_every`` (1 = every sample, 0 = never), so decimation does not depend on batch borders.
+    """
+    index = time_column(arrays.t_s)
+    out: list[SendColumns] = [
+        (paths.track, index, rr.Points3D.columns(positions=arrays.pos, class_ids=arrays.class_ids)),
+        (paths.pose, index, rr.Transform3D.columns(translation=arrays.pos, quaternion=arrays.quat_xyzw)),
+        (paths.stance, index, rr.Scalars.columns(scalars=arrays.stance)),
+        (paths.clearance, index, rr.Scalars.columns(scalars=arrays.clearance)),
+        (paths.pos_sigma, index, rr.Scalars.columns(scalars=arrays.pos_sigma)),
+        (paths.detector, index, rr.Scalars.columns(scalars=arrays.detector)),
+    ]
+    if ellipsoid_every < 1:
+        return out
+    sl = slice((-first_index) % ellipsoid_every, None, ellipsoid_every)
+    t_cov = arrays.t_s[sl]
+    if t_cov.size:
+        cov_index = index if ellipsoid_every == 1 else time_column(t_cov)
+        cov_cols = rr.Ellipsoids3D.columns(
+            centers=arrays.pos[sl], half_sizes=arrays.cov_half_sizes[sl], quaternions=arrays.cov_quat_xyzw[sl]
+        )
+        out.append((paths.cov, cov_index, cov_cols))
+    return out
+
+
+def gait_columns(
+    t_s: F64, stance: NDArray[np.bool_], paths: FootPaths, *, previous: bool | None
+) -> SendColumns | None:
+    """StateChange column for the stance/swing lane, only at transitions (None when there are none)."""
+    idx = stance_transitions(stance, previous)
+    if idx.size == 0:
+        return None
+    states = np.where(np.asarray(stance, dtype=bool)[idx], STANCE_STATE, SWING_STATE).tolist()
+    return paths.gait, time_column(np.asarray(t_s)[idx]), rr.StateChange.columns(state=states)

@@ -1,0 +1,358 @@
+"""The Rerun logger: one thread, fed by a bounded queue, batching NavBatches into ``send_columns``.
+
+Callers (the asyncio pipeline included) only enqueue: :meth:`RerunLogger.put` never blocks by
+default. Every Rerun call — sink set-up, static setup, ``send_columns``, flush, disconnect — happens
+on the logger's own daemon thread, so the event loop never waits on the viewer or the disk.
+
+Drop policy: the queue is bounded by a sample budget (default 120 000 samples, two minutes of 1 kHz,
+about 25 MB). At 1 kHz the thread needs a few % of one core, so the budget only fills when a sink
+stalls (e.g. a viewer that stopped reading) or when a replay runs far faster than real time. Then
+``put`` drops the batch, counts it in :class:`LoggerStats` and the logger writes an ERROR entry to
+``events`` in the recording, so the loss is visible in the viewer and the file. A producer that may
+run ahead (as-fast-as-possible replay, off the event loop) can pass ``timeout_s`` to wait for room
+instead of dropping. The estimator and the capture never depend on this queue.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from types import TracebackType
+
+import numpy as np
+import rerun as rr
+from numpy.typing import NDArray
+from rerun.sinks import LogSinkLike
+
+from pipeline.nav_types import NavBatch
+from views import convert
+from views.blueprint import build_blueprint, floor_patch, static_setup
+from views.paths import DEFAULT_FOOT, EVENTS, FootPaths
+
+log = logging.getLogger(__name__)
+
+APPLICATION_ID = "footnav"
+FLUSH_PERIOD_S = 0.1
+MAX_ROWS_PER_SEND = 20_000
+DEFAULT_MAX_QUEUED_SAMPLES = 120_000
+DEFAULT_ELLIPSOID_EVERY = 10
+"""Ellipsoid decimation: 100 Hz at 1 kHz, visually the same, ~25 % smaller files than every sample."""
+CLOSE_TIMEOUT_S = 10.0
+
+
+@dataclass(frozen=True, slots=True)
+class _Event:
+    text: str
+    level: str
+    t_s: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class _Truth:
+    foot: str
+    t_s: NDArray[np.float64]
+    pos_n_m: NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class _Nav:
+    foot: str
+    nav: NavBatch
+
+
+_STOP = object()
+
+
+@dataclass(slots=True)
+class LoggerStats:
+    """Counters of one :class:`RerunLogger` (read them any time; exact after :meth:`RerunLogger.close`).
+
+    Attributes:
+        samples_in: samples accepted by ``put``.
+        samples_logged: samples handed to ``send_columns``.
+        samples_dropped: samples refused by ``put`` because the queue was full (or after close).
+        batches_dropped: NavBatches refused.
+        sends: ``send_columns`` rounds (one per ~100 ms flush).
+        send_seconds: time spent converting and in ``send_columns``, s.
+        max_queued_samples: high-water mark of the queue, samples.
+        error: first exception raised on the logger thread (the thread keeps draining after it).
+    """
+
+    samples_in: int = 0
+    samples_logged: int = 0
+    samples_dropped: int = 0
+    batches_dropped: int = 0
+    sends: int = 0
+    send_seconds: float = 0.0
+    max_queued_samples: int = 0
+    error: BaseException | None = None
+
+
+class RerunLogger:
+    """Logs NavBatches to Rerun sinks from one background thread.
+
+    Args:
+        sinks: where the recording goes (see :func:`views.sinks.choose_sinks`); at least one.
+        recording_id: one id per walking session; files and viewers merge streams with equal ids.
+        feet: foot names that will be logged (sets up blueprint and static styling).
+        sigma_scale: covariance ellipsoids are drawn at this many σ.
+        ellipsoid_every: log the ellipsoid every n-th sample (1 = every sample, 0 = never).
+        max_queued_samples: queue budget; beyond it ``put`` drops (see module docstring).
+        flush_period_s: batching period of the thread.
+
+    Raises:
+        ValueError: no sinks given.
+    """
+
+    def __init__(
+        self,
+        sinks: Sequence[LogSinkLike],
+        *,
+        recording_id: str,
+        feet: Sequence[str] = (DEFAULT_FOOT,),
+        sigma_scale: float = convert.DEFAULT_SIGMA_SCALE,
+        ellipsoid_every: int = DEFAULT_ELLIPSOID_EVERY,
+        max_queued_samples: int = DEFAULT_MAX_QUEUED_SAMPLES,
+        flush_period_s: float = FLUSH_PERIOD_S,
+    ) -> None:
+        if not sinks:
+            raise ValueError("RerunLogger needs at least one sink (a viewer or a file); none were given")
+        self.recording_id = recording_id
+        self.feet = tuple(feet)
+        self._paths = {f: FootPaths(f) for f in self.feet}
+        self._sinks = tuple(sinks)
+        self._sigma_scale = sigma_scale
+        self._ellipsoid_every = ellipsoid_every
+        self._max_queued = max_queued_samples
+        self._flush_period_s = flush_period_s
+        self.stats = LoggerStats()
+
+        self.recording = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
+        self._queue: queue.SimpleQueue[object] = queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self._room = threading.Condition(self._lock)
+        self._queued = 0
+        self._waiting = 0  # producers blocked in put(timeout_s>0): flush at once rather than on the tick
+        self._closed = False
+        self._reported_drops = 0
+        self._last_t_s: float | None = None
+        self._last_stance: dict[str, bool | None] = dict.fromkeys(self.feet)
+        self._foot_samples: dict[str, int] = dict.fromkeys(self.feet, 0)
+        self._floor_logged = False
+        self._thread = threading.Thread(target=self._run, name="footnav-rerun", daemon=True)
+        self._thread.start()
+
+    # ------------------------------------------------------------------ producer side (any thread)
+
+    def put(self, nav: NavBatch, *, foot: str = DEFAULT_FOOT, timeout_s: float = 0.0) -> bool:
+        """Queue a batch for logging; returns False if it was dropped (counted in :attr:`stats`).
+
+        With ``timeout_s == 0`` (the default) this never blocks: safe on the event loop.
+        """
+        if foot not in self._paths:
+            raise ValueError(f"foot {foot!r} was not declared; this logger has feet={self.feet}")
+        n = len(nav)
+        if n == 0:
+            return True
+        with self._room:
+            if not self._closed and self._queued + n > self._max_queued and timeout_s > 0:
+                self._waiting += 1
+                try:
+                    self._room.wait_for(lambda: self._closed or self._has_room(n), timeout_s)
+                finally:
+                    self._waiting -= 1
+            if self._closed or self._queued + n > self._max_queued:
+                self.stats.samples_dropped += n
+                self.stats.batches_dropped += 1
+                return False
+            self._queued += n
+            self.stats.samples_in += n
+            self.stats.max_queued_samples = max(self.stats.max_queued_samples, self._queued)
+        self._queue.put(_Nav(foot, nav))
+        return True
+
+    def _has_room(self, n: int) -> bool:
+        return self._queued + n <= self._max_queued
+
+    def log_event(self, text: str, *, level: str = "INFO", t_s: float | None = None) -> None:
+        """Log a text event at device time ``t_s`` (default: the newest sample time seen). Never blocks."""
+        if not self._closed:
+            self._queue.put(_Event(text, level, t_s))
+
+    def log_truth(
+        self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT
+    ) -> None:
+        """Log a ground-truth track: positions (n, 3), m, at device times (n,), s. Never blocks."""
+        if foot not in self._paths:
+            raise ValueError(f"foot {foot!r} was not declared; this logger has feet={self.feet}")
+        if not self._closed:
+            self._queue.put(_Truth(foot, np.asarray(t_s, np.float64), np.asarray(pos_n_m, np.float64)))
+
+    def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> bool:
+        """Log what is queued, flush, disconnect the sinks (file footers written), join the thread.
+
+        Returns False if the thread did not finish within ``timeout_s`` (a stalled sink); the data
+        already written stays readable.
+        """
+        with self._room:
+            if self._closed:
+                return not self._thread.is_alive()
+            self._closed = True
+            self._room.notify_all()
+        self._queue.put(_STOP)
+        self._thread.join(timeout_s)
+        if self._thread.is_alive():
+            log.error("Rerun logger did not finish within %.1f s; a sink may be stalled", timeout_s)
+            return False
+        return True
+
+    def __enter__(self) -> RerunLogger:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ logger thread
+
+    def _run(self) -> None:
+        rec = self.recording
+        try:
+            rec.set_sinks(*self._sinks, default_blueprint=build_blueprint(self.feet))
+            for path, archetype in static_setup(self.feet):
+                rec.log(path, archetype, static=True)
+        except Exception as exc:  # no usable sink: drain and discard rather than buffer in memory
+            self._record_error(exc)
+            self._discard_until_stop()
+            return
+        pending: dict[str, list[NavBatch]] = {f: [] for f in self.feet}
+        events: list[_Event] = []
+        n_pending = 0
+        deadline: float | None = None
+        while True:
+            timeout = None if deadline is None else max(0.0, deadline - time.monotonic())
+            try:
+                item = self._queue.get(timeout=timeout)
+            except queue.Empty:
+                item = None
+            if isinstance(item, _Nav):
+                pending[item.foot].append(item.nav)
+                n_pending += len(item.nav)
+            elif isinstance(item, _Event):
+                events.append(item)
+            elif isinstance(item, _Truth):
+                self._flush(pending, events)  # keep the order: truth after earlier nav
+                n_pending, deadline = 0, None
+                self._guarded(self._send_truth, item)
+                continue
+            stop = item is _STOP
+            if deadline is None and item is not None and not stop:
+                deadline = time.monotonic() + self._flush_period_s
+            if stop or item is None or n_pending >= MAX_ROWS_PER_SEND or (n_pending and self._waiting):
+                self._flush(pending, events)
+                n_pending, deadline = 0, None
+            if stop:
+                break
+        self._guarded(self._finish)
+
+    def _discard_until_stop(self) -> None:
+        while (item := self._queue.get()) is not _STOP:
+            if isinstance(item, _Nav):
+                with self._room:
+                    self._queued -= len(item.nav)
+                    self.stats.samples_dropped += len(item.nav)
+                    self._room.notify_all()
+
+    def _flush(self, pending: dict[str, list[NavBatch]], events: list[_Event]) -> None:
+        start = time.perf_counter()
+        n_done = 0
+        for foot, batches in pending.items():
+            if not batches:
+                continue
+            n = sum(len(b) for b in batches)
+            try:
+                self._send_nav(foot, convert.concat_batches(batches))
+            except Exception as exc:
+                self._record_error(exc)
+            batches.clear()
+            n_done += n
+        with self._room:
+            self._queued -= n_done
+            self.stats.samples_logged += n_done
+            dropped = self.stats.samples_dropped
+            self._room.notify_all()
+        if dropped > self._reported_drops:
+            events.append(
+                _Event(
+                    f"viewer/recording fell behind: {dropped - self._reported_drops} samples not logged "
+                    f"({dropped} in total); the capture and the estimates are unaffected",
+                    "ERROR",
+                    None,
+                )
+            )
+            self._reported_drops = dropped
+        if events:
+            self._guarded(self._send_events, events)
+            events.clear()
+        if n_done:
+            self.stats.sends += 1
+            self.stats.send_seconds += time.perf_counter() - start
+
+    def _send_nav(self, foot: str, nav: NavBatch) -> None:
+        paths = self._paths[foot]
+        rec = self.recording
+        arrays = convert.nav_arrays(nav, sigma_scale=self._sigma_scale)
+        if not self._floor_logged:
+            floor_z = float(arrays.pos[0, 2] - arrays.clearance[0])
+            if np.isfinite(floor_z):
+                rec.log(
+                    *floor_patch(floor_z, center_xy=(float(arrays.pos[0, 0]), float(arrays.pos[0, 1]))),
+                    static=True,
+                )
+                self._floor_logged = True
+        for path, index, columns in convert.nav_columns(
+            arrays, paths, ellipsoid_every=self._ellipsoid_every, first_index=self._foot_samples[foot]
+        ):
+            rec.send_columns(path, indexes=[index], columns=columns)
+        self._foot_samples[foot] += len(nav)
+        gait = convert.gait_columns(arrays.t_s, nav.stance, paths, previous=self._last_stance[foot])
+        if gait is not None:
+            rec.send_columns(gait[0], indexes=[gait[1]], columns=gait[2])
+        self._last_stance[foot] = bool(nav.stance[-1])
+        self._last_t_s = float(arrays.t_s[-1])
+
+    def _send_events(self, events: list[_Event]) -> None:
+        default_t = self._last_t_s if self._last_t_s is not None else 0.0
+        t = np.array([default_t if e.t_s is None else e.t_s for e in events], dtype=np.float64)
+        self.recording.send_columns(
+            EVENTS,
+            indexes=[convert.time_column(t)],
+            columns=rr.TextLog.columns(text=[e.text for e in events], level=[e.level for e in events]),
+        )
+
+    def _send_truth(self, truth: _Truth) -> None:
+        self.recording.send_columns(
+            self._paths[truth.foot].truth,
+            indexes=[convert.time_column(truth.t_s)],
+            columns=rr.Points3D.columns(positions=truth.pos_n_m.astype(np.float32)),
+        )
+
+    def _finish(self) -> None:
+        self.recording.flush(timeout_sec=CLOSE_TIMEOUT_S)
+        self.recording.disconnect()
+
+    def _guarded(self, fn: Callable[..., None], *args: object) -> None:
+        try:
+            fn(*args)
+        except Exception as exc:
+            self._record_error(exc)
+
+    def _record_error(self, exc: BaseException) -> None:
+        log.exception("Rerun logger error (logging continues)", exc_info=exc)
+        if self.stats.error is None:
+            self.stats.error = exc

@@ -1,0 +1,106 @@
+"""Entity paths and the timeline: the one place footnav's Rerun layout is spelled out.
+
+Per-foot entities take a foot name (``"foot"`` for a one-shoe session, ``"left"``/``"right"`` later),
+so two feet become siblings under ``world/`` and in each plot:
+
+- ``world/<foot>/track``  Points3D, one point per sample (class id 1 = stance), shown as a trail;
+- ``world/<foot>/pose``   Transform3D (translation + rotation) of the IMU at each sample;
+- ``world/<foot>/pose/shoe``  static Boxes3D drawn in the IMU frame (inherits the pose);
+- ``world/<foot>/cov``    Ellipsoids3D, k-sigma position covariance in the navigation frame
+  (sibling of ``pose``, positioned with ``centers``: it must not inherit the foot rotation);
+- ``world/truth/<foot>``  optional ground-truth track;
+- ``plots/<quantity>/<foot>``  Scalars, so one time-series view per quantity shows both feet;
+- ``gait/<foot>``  StateChange lane (stance/swing transitions only).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+TIMELINE = "imu_time"
+"""Timeline name: device time as a duration in seconds (``rr.TimeColumn(TIMELINE, duration=t_s)``)."""
+
+WORLD = "world"
+"""Root of the 3D scene: navigation frame, right-handed, z up, origin at the start position."""
+
+FLOOR = "world/floor"
+"""Static patch of the floor the walk started on."""
+
+EVENTS = "events"
+"""TextLog entries (session events, warnings, dropped-data errors)."""
+
+PLOTS = "plots"
+GAIT = "gait"
+TRUTH = "world/truth"
+
+DEFAULT_FOOT = "foot"
+
+
+@dataclass(frozen=True, slots=True)
+class FootPaths:
+    """Entity paths of one foot.
+
+    Attributes:
+        foot: name used in every path, e.g. ``"foot"``, ``"left"``, ``"right"``.
+    """
+
+    foot: str = DEFAULT_FOOT
+
+    def __post_init__(self) -> None:
+        if not self.foot or "/" in self.foot or not self.foot.isidentifier():
+            raise ValueError(f"foot name must be a plain identifier like 'left', got {self.foot!r}")
+
+    @property
+    def root(self) -> str:
+        """``world/<foot>``."""
+        return f"{WORLD}/{self.foot}"
+
+    @property
+    def track(self) -> str:
+        """Per-sample IMU positions (Points3D)."""
+        return f"{self.root}/track"
+
+    @property
+    def pose(self) -> str:
+        """Current IMU pose (Transform3D)."""
+        return f"{self.root}/pose"
+
+    @property
+    def shoe(self) -> str:
+        """Static box drawn in the IMU frame, child of :attr:`pose`."""
+        return f"{self.pose}/shoe"
+
+    @property
+    def cov(self) -> str:
+        """k-sigma position covariance ellipsoid (Ellipsoids3D with centers, navigation frame)."""
+        return f"{self.root}/cov"
+
+    @property
+    def truth(self) -> str:
+        """Ground-truth track of this foot."""
+        return f"{TRUTH}/{self.foot}"
+
+    @property
+    def stance(self) -> str:
+        """Stance flag, 0.0 (swing) or 1.0 (stance), one scalar per sample."""
+        return f"{PLOTS}/stance/{self.foot}"
+
+    @property
+    def clearance(self) -> str:
+        """Foot clearance above the starting floor, m."""
+        return f"{PLOTS}/clearance/{self.foot}"
+
+    @property
+    def pos_sigma(self) -> str:
+        """Position standard deviations ``[σx, σy, σz, sqrt(trace P)]``, m."""
+        return f"{PLOTS}/pos_sigma/{self.foot}"
+
+    @property
+    def detector(self) -> str:
+        """Zero-velocity detector ``[statistic, threshold]``."""
+        return f"{PLOTS}/detector/{self.foot}"
+
+    @property
+    def gait(self) -> str:
+        """Stance/swing state lane (StateChange, logged on transitions)."""
+        return f"{GAIT}/{self.foot}"

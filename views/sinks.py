@@ -1,0 +1,183 @@
+"""Where a session's Rerun data goes: a native viewer on this machine, a .rrd file, or both.
+
+Everything listens on 127.0.0.1 only: the viewer is started from the installed rerun-sdk wheel
+(``rerun_cli/rerun``, the same version as the SDK) with ``--bind 127.0.0.1`` rather than through
+``rr.spawn``, which binds 0.0.0.0. Without a display (no ``DISPLAY``/``WAYLAND_DISPLAY``) no viewer
+is started — spawning one there stalls for ~11 s and loses data — and the session is saved instead.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Mapping
+from datetime import datetime
+from pathlib import Path
+
+import rerun as rr
+from rerun.sinks import LogSinkLike
+
+from pipeline.errors import FootnavError
+
+LOOPBACK = "127.0.0.1"
+VIEWER_MEMORY_LIMIT = "25%"
+"""The viewer drops its oldest data beyond this (of system RAM); its RSS is about 2–2.5× this."""
+VIEWER_SERVER_MEMORY_LIMIT = "256MB"
+"""Cap on the viewer's gRPC proxy buffer (default 1 GiB)."""
+VIEWER_START_TIMEOUT_S = 8.0
+VIEWER_GRACE_S = 1.0
+"""A viewer that cannot open its window opens its port first and exits a moment later: wait this long."""
+
+
+class ViewerStartError(FootnavError):
+    """The Rerun viewer could not be started or did not open its port."""
+
+
+def has_display(environ: Mapping[str, str] | None = None) -> bool:
+    """True if a viewer window can open: ``DISPLAY`` or ``WAYLAND_DISPLAY`` set (always on macOS/Windows)."""
+    env = os.environ if environ is None else environ
+    if sys.platform in ("darwin", "win32"):
+        return True
+    return bool(env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"))
+
+
+def viewer_binary() -> Path:
+    """Path of the viewer executable shipped in the rerun-sdk wheel (``rerun_cli/rerun``).
+
+    Raises:
+        ViewerStartError: the wheel has no viewer binary.
+    """
+    import rerun_cli
+
+    exe = Path(rerun_cli.__file__).parent / ("rerun.exe" if sys.platform == "win32" else "rerun")
+    if not exe.is_file():
+        raise ViewerStartError(f"the Rerun viewer is missing from the rerun-sdk install (expected {exe})")
+    return exe
+
+
+def _free_loopback_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((LOOPBACK, 0))
+        return int(s.getsockname()[1])
+
+
+def _port_open(port: int) -> bool:
+    try:
+        with socket.create_connection((LOOPBACK, port), timeout=0.2):
+            return True
+    except OSError:
+        return False
+
+
+def spawn_viewer(
+    *,
+    memory_limit: str = VIEWER_MEMORY_LIMIT,
+    server_memory_limit: str = VIEWER_SERVER_MEMORY_LIMIT,
+    timeout_s: float = VIEWER_START_TIMEOUT_S,
+    env: Mapping[str, str] | None = None,
+) -> tuple[str, subprocess.Popen[bytes]]:
+    """Start a native viewer listening on 127.0.0.1 and wait until it accepts connections.
+
+    Blocks up to ``timeout_s``: call it before the event loop starts, or through ``asyncio.to_thread``.
+    The viewer runs in its own session so it outlives footnav (the user closes it). ``env`` replaces
+    the viewer's environment (default: inherited).
+
+    Returns:
+        The ``rerun+http://127.0.0.1:PORT/proxy`` URL for ``rr.GrpcSink``, and the process.
+
+    Raises:
+        ViewerStartError: the viewer exited or did not open its port in time.
+    """
+    port = _free_loopback_port()
+    cmd = [
+        str(viewer_binary()),
+        "--bind", LOOPBACK,
+        "--port", str(port),
+        "--memory-limit", memory_limit,
+        "--server-memory-limit", server_memory_limit,
+        "--expect-data-soon",
+    ]  # fmt: skip
+    proc = subprocess.Popen(
+        cmd,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+        env=None if env is None else dict(env),
+    )
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise ViewerStartError(
+                f"the Rerun viewer exited at start-up (code {proc.returncode}); "
+                f"try running `{cmd[0]}` yourself to see why, or use --save FILE.rrd"
+            )
+        if _port_open(port):
+            try:
+                code = proc.wait(VIEWER_GRACE_S)
+            except subprocess.TimeoutExpired:
+                return f"rerun+http://{LOOPBACK}:{port}/proxy", proc
+            raise ViewerStartError(
+                f"the Rerun viewer exited right after start-up (code {code}); "
+                f"try running `{cmd[0]}` yourself to see why, or use --save FILE.rrd"
+            )
+        time.sleep(0.05)
+    proc.terminate()
+    raise ViewerStartError(
+        f"the Rerun viewer did not open port {port} within {timeout_s:.0f} s; "
+        "use --save FILE.rrd and open the file later"
+    )
+
+
+def default_save_path(now: datetime | None = None, directory: Path | None = None) -> Path:
+    """``footnav-YYYYmmdd-HHMMSS.rrd`` in ``directory`` (default: the working directory)."""
+    stamp = (now or datetime.now()).strftime("%Y%m%d-%H%M%S")
+    return (directory or Path.cwd()) / f"footnav-{stamp}.rrd"
+
+
+def choose_sinks(
+    save_path: Path | None,
+    want_viewer: bool,
+    *,
+    environ: Mapping[str, str] | None = None,
+    memory_limit: str = VIEWER_MEMORY_LIMIT,
+) -> tuple[list[LogSinkLike], str]:
+    """Pick the Rerun sinks for a session and describe the choice in one line for the terminal.
+
+    - viewer wanted and a display present: spawn a native viewer (127.0.0.1) and stream to it;
+      if it fails to start, fall back to a file;
+    - viewer wanted, no display: save to ``save_path`` or :func:`default_save_path`;
+    - ``save_path`` given: always also a ``FileSink`` (footer written on close).
+
+    ``environ`` stands in for ``os.environ`` (display detection and the viewer's environment).
+    An empty list means Rerun output is off (no viewer wanted, no file); do not create a logger then.
+    May block up to :data:`VIEWER_START_TIMEOUT_S` while a viewer starts.
+    """
+    sinks: list[LogSinkLike] = []
+    notes: list[str] = []
+    fallback = False
+    if want_viewer:
+        if has_display(environ):
+            try:
+                url, proc = spawn_viewer(memory_limit=memory_limit, env=environ)
+            except ViewerStartError as exc:
+                notes.append(f"viewer not started: {exc}")
+                fallback = True
+            else:
+                sinks.append(rr.GrpcSink(url))
+                notes.append(
+                    f"streaming to a Rerun viewer (pid {proc.pid}, {url}, memory limit {memory_limit})"
+                )
+        else:
+            notes.append("no display (neither DISPLAY nor WAYLAND_DISPLAY is set): no viewer")
+            fallback = True
+    path = save_path if save_path is not None else (default_save_path() if fallback else None)
+    if path is not None:
+        sinks.append(rr.FileSink(str(path)))
+        notes.append(f"saving to {path}; view it with `rerun {path}`")
+    if not sinks:
+        notes.append("Rerun output off (no viewer, no --save)")
+    return sinks, "; ".join(notes)
