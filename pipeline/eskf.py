@@ -14,8 +14,12 @@ gyroscope bias states:
     δθ' = −R δb_g − R ω_n
     δb_a' = a_w,  δb_g' = ω_w
 
-Updates while the foot is still: zero velocity (ZUPT, z = 0 − v) and zero angular rate
-(ZARU, z = ω_m − b_g), one 6-dimensional update, Joseph form, then injection and reset (Solà §7.3).
+Updates while the foot is still: zero velocity (ZUPT, z = 0 − v), then zero angular rate (ZARU,
+z = ω_m − b_g), each in Joseph form followed by injection and reset (Solà §7.3). A stance that
+passes the zero-velocity detector may still rotate (heel and toe roll, running), which would drag
+the gyro bias, so ZARU is applied only when its normalised innovation passes a χ² gate. For the same
+reason the ZUPT noise admits the velocity of a foot rolling about a contact point at most r from
+the IMU: σ_v² = σ_zupt² + (r |ω|)², since |v_imu| = |ω × r| ≤ r |ω| for a rigid foot.
 The covariance propagation multiplies only the non-identity blocks of F (about 1.5k multiply-adds
 per sample instead of 2 × 15³).
 """
@@ -37,12 +41,13 @@ N_STATE = 15
 P0, V0, TH0, BA0, BG0 = 0, 3, 6, 9, 12
 
 # layout of the parameter vector handed to the compiled loop
-PAR_SIG_ACC, PAR_SIG_GYR, PAR_BA_RW, PAR_BG_RW, PAR_ZUPT, PAR_ZARU, PAR_G, PAR_DT_MAX = range(8)
-N_PAR = 8
+(PAR_SIG_ACC, PAR_SIG_GYR, PAR_BA_RW, PAR_BG_RW, PAR_ZUPT, PAR_ZARU, PAR_G, PAR_DT_MAX, PAR_ZARU_GATE,
+ PAR_ROLL_LEVER) = range(10)
+N_PAR = 10
 
 # counters returned by run_filter
-CNT_BAD_DT, CNT_GAP, CNT_BAD_SAMPLE, CNT_UPDATES = range(4)
-N_CNT = 4
+CNT_BAD_DT, CNT_GAP, CNT_BAD_SAMPLE, CNT_UPDATES, CNT_ZARU, CNT_ZARU_REJECTED = range(6)
+N_CNT = 6
 
 
 @njit(cache=True)
@@ -122,6 +127,23 @@ def _spd_inverse(S: F64) -> F64:
                 acc += Linv[k, i] * Linv[k, j]
             out[i, j] = acc
     return out
+
+
+@njit(cache=True)
+def _nis_selected(P: F64, idx: NDArray[np.int64], y: F64, r_diag: F64) -> float:
+    """Normalised innovation squared yᵀ S⁻¹ y of a measurement observing the states ``idx``."""  # pragma: no cover
+    m = idx.shape[0]
+    S = np.empty((m, m))
+    for a in range(m):
+        for b in range(m):
+            S[a, b] = P[idx[a], idx[b]]
+        S[a, a] += r_diag[a]
+    S_inv = _spd_inverse(S)
+    nis = 0.0
+    for a in range(m):
+        for b in range(m):
+            nis += y[a] * S_inv[a, b] * y[b]
+    return nis
 
 
 @njit(cache=True)
@@ -219,12 +241,11 @@ def run_filter(
     n = acc_b_mps2.shape[0]
     g = par[PAR_G]
     q_diag = np.zeros(N_STATE)
-    idx = np.array([V0, V0 + 1, V0 + 2, BG0, BG0 + 1, BG0 + 2], dtype=np.int64)
-    r_diag = np.empty(6)
-    for r in range(3):
-        r_diag[r] = par[PAR_ZUPT] ** 2
-        r_diag[3 + r] = par[PAR_ZARU] ** 2
-    y = np.empty(6)
+    idx_v = np.array([V0, V0 + 1, V0 + 2], dtype=np.int64)
+    idx_bg = np.array([BG0, BG0 + 1, BG0 + 2], dtype=np.int64)
+    r_zupt = np.full(3, par[PAR_ZUPT] ** 2)
+    r_zaru = np.full(3, par[PAR_ZARU] ** 2)
+    y = np.empty(3)
     omega = np.empty(3)
     f_b = np.empty(3)
     rv = np.empty(3)
@@ -274,11 +295,21 @@ def run_filter(
                 q_diag[BG0 + r] = par[PAR_BG_RW] ** 2 * dt
             _propagate_cov(P, R0, f_n, dt, q_diag)
         if stance[k] and not bad:
+            w2 = 0.0
             for r in range(3):
                 y[r] = -x[3 + r]
-                y[3 + r] = gyr_b_radps[k, r] - x[13 + r]
-            _update_selected(x, P, idx, y, r_diag)
+                w2 += (gyr_b_radps[k, r] - x[13 + r]) ** 2
+            for r in range(3):
+                r_zupt[r] = par[PAR_ZUPT] ** 2 + par[PAR_ROLL_LEVER] ** 2 * w2
+            _update_selected(x, P, idx_v, y, r_zupt)
             counters[CNT_UPDATES] += 1
+            for r in range(3):
+                y[r] = gyr_b_radps[k, r] - x[13 + r]
+            if _nis_selected(P, idx_bg, y, r_zaru) < par[PAR_ZARU_GATE]:
+                _update_selected(x, P, idx_bg, y, r_zaru)
+                counters[CNT_ZARU] += 1
+            else:
+                counters[CNT_ZARU_REJECTED] += 1
         for r in range(3):
             out_pos[k, r] = x[r]
             out_vel[k, r] = x[3 + r]

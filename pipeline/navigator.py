@@ -23,6 +23,8 @@ from pipeline.samples import ImuBatch
 
 F64 = NDArray[np.float64]
 
+ZARU_GATE_CHI2_3DOF = 11.345  # χ²(3) at 99 %: reject zero-angular-rate updates of a rotating foot
+
 
 @dataclass(frozen=True, slots=True)
 class NavConfig:
@@ -60,6 +62,8 @@ class NavStats:
     gaps: int = 0
     bad_samples: int = 0
     zero_velocity_updates: int = 0
+    zero_rate_updates: int = 0
+    zero_rate_rejected: int = 0
     aligned_at_s: float | None = None
 
 
@@ -84,6 +88,8 @@ def filter_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float,
     )
     par[eskf.PAR_G] = gravity_mps2
     par[eskf.PAR_DT_MAX] = dt_max_s
+    par[eskf.PAR_ZARU_GATE] = ZARU_GATE_CHI2_3DOF
+    par[eskf.PAR_ROLL_LEVER] = profile.roll_lever_m
     return par
 
 
@@ -191,6 +197,7 @@ class Navigator:
         s = self.stats
         s.bad_dt, s.gaps = int(c[eskf.CNT_BAD_DT]), int(c[eskf.CNT_GAP])
         s.bad_samples, s.zero_velocity_updates = int(c[eskf.CNT_BAD_SAMPLE]), int(c[eskf.CNT_UPDATES])
+        s.zero_rate_updates, s.zero_rate_rejected = int(c[eskf.CNT_ZARU]), int(c[eskf.CNT_ZARU_REJECTED])
         s.samples_out += n
         return NavBatch(
             t_s=batch.t_s,

@@ -32,6 +32,8 @@ class UnitProfile:
         zupt_sigma_mps: zero-velocity pseudo-measurement 1σ, m/s (OpenShoe 0.1, pyshoe 0.01).
         zaru_sigma_radps: zero-angular-rate pseudo-measurement 1σ during stance, rad/s: the
             residual rotation of a standing foot plus sensor noise.
+        roll_lever_m: distance from the IMU to the point the foot rolls about during stance (heel,
+            toe), m; the ZUPT noise grows by this times the angular rate (see ``pipeline.eskf``).
     """
 
     name: str
@@ -45,6 +47,7 @@ class UnitProfile:
     motion_gyr_radps: float = 0.5 * DEG
     zupt_sigma_mps: float = 0.01
     zaru_sigma_radps: float = 0.5 * DEG
+    roll_lever_m: float = 0.1  # about half a shoe length
 
 
 PROFILES: dict[str, UnitProfile] = {
