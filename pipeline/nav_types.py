@@ -24,7 +24,7 @@ class NavBatch:
         pos_cov_n_m2: (n, 3, 3) position covariance, m².
         stance: (n,) True where the zero-velocity detector declared the foot still.
         detector_stat: (n,) the detector's test statistic (dimensionless).
-        detector_threshold: scalar threshold the statistic is compared with.
+        detector_threshold: (n,) the threshold in force at each sample (it adapts to the gait).
         clearance_m: (n,) height of the IMU above the floor the walk started on, m.
         host_ns: (n,) host receive time of each sample (latency accounting).
     """
@@ -36,7 +36,7 @@ class NavBatch:
     pos_cov_n_m2: F64
     stance: NDArray[np.bool_]
     detector_stat: F64
-    detector_threshold: float
+    detector_threshold: F64
     clearance_m: F64
     host_ns: NDArray[np.int64]
 

@@ -1,9 +1,11 @@
 """The causal navigator: SHOE detection + error-state filter over a stream of sample batches.
 
 ``Navigator.process`` takes one ``ImuBatch`` at a time and returns the estimates for every sample it
-could navigate. Until the unit has been still for ``align_s`` it buffers; it then aligns on that
-still period and navigates from its first sample, so a walk that starts still loses nothing.
-Samples before the first still period cannot be navigated and are counted, not guessed.
+could navigate. Until the unit has been quiet for ``align_s`` it buffers; it then aligns on that
+period and navigates from its first sample, so a walk that starts still loses nothing. "Quiet" for
+alignment is a physical bound of its own (|ω| and the spread of |f| small), independent of the
+zero-velocity detector, whose adaptive threshold knows nothing before the first steps. Samples
+before the first quiet period cannot be navigated and are counted, not guessed.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from numpy.typing import NDArray
 
 from pipeline import eskf
 from pipeline.alignment import align_from_still
-from pipeline.detectors import ShoeParams, StreamingShoe
+from pipeline.detectors import DetectorParams, StreamingDetector
 from pipeline.nav_types import NavBatch
 from pipeline.profiles import UnitProfile, get_profile
 from pipeline.samples import ImuBatch
@@ -32,8 +34,10 @@ class NavConfig:
 
     Attributes:
         profile: the unit's noise model (``pipeline.profiles``).
-        detector: SHOE settings.
-        align_s: continuous still time needed for the initial alignment, s.
+        detector: zero-velocity detector settings.
+        align_s: continuous quiet time needed for the initial alignment, s.
+        align_max_rate_radps: quiet means |ω| below this at every sample of the window, rad/s.
+        align_max_acc_dev_mps2: and | |f| − mean |f| | below this, m/s².
         dt_max_s: intervals longer than this are counted as gaps in the stream, s.
         init_pos_sigma_m, init_vel_sigma_mps: initial 1σ of position and velocity.
         init_tilt_sigma_rad, init_yaw_sigma_rad: initial 1σ of roll/pitch and of yaw.
@@ -41,8 +45,10 @@ class NavConfig:
     """
 
     profile: UnitProfile = field(default_factory=lambda: get_profile("mpu6500x4"))
-    detector: ShoeParams = field(default_factory=ShoeParams)
+    detector: DetectorParams = field(default_factory=DetectorParams)
     align_s: float = 0.5
+    align_max_rate_radps: float = 0.3
+    align_max_acc_dev_mps2: float = 0.5
     dt_max_s: float = 0.05
     init_pos_sigma_m: float = 1e-5
     init_vel_sigma_mps: float = 0.01
@@ -104,9 +110,9 @@ class Navigator:
     def __init__(self, config: NavConfig, rate_hz: float) -> None:
         self.config = config
         self.rate_hz = rate_hz
-        self.detector = StreamingShoe(config.detector, rate_hz)
+        self.detector = StreamingDetector(config.detector, rate_hz)
         self.stats = NavStats()
-        self._pending: list[tuple[ImuBatch, F64, NDArray[np.bool_]]] = []
+        self._pending: list[tuple[ImuBatch, F64, F64, NDArray[np.bool_]]] = []
         self._x: F64 | None = None
         self._P = np.zeros((eskf.N_STATE, eskf.N_STATE))
         self._par = np.zeros(eskf.N_PAR)
@@ -127,25 +133,26 @@ class Navigator:
         if len(batch) == 0:
             return None
         self.stats.samples_in += len(batch)
-        stat, still = self.detector.update(batch.acc_b_mps2, batch.gyr_b_radps)
+        stat, threshold, still = self.detector.update(batch.acc_b_mps2, batch.gyr_b_radps)
         if self._x is None:
-            self._pending.append((batch, stat, still))
+            self._pending.append((batch, stat, threshold, still))
             return self._try_align()
-        return self._run(batch, stat, still)
+        return self._run(batch, stat, threshold, still)
 
     def _try_align(self) -> NavBatch | None:
-        batch = ImuBatch.concat([b for b, _, _ in self._pending])
-        stat = np.concatenate([s for _, s, _ in self._pending])
-        still = np.concatenate([z for _, _, z in self._pending])
+        batch = ImuBatch.concat([b for b, _, _, _ in self._pending])
+        stat = np.concatenate([s for _, s, _, _ in self._pending])
+        threshold = np.concatenate([t for _, _, t, _ in self._pending])
+        still = np.concatenate([z for _, _, _, z in self._pending])
         need = max(2, round(self.config.align_s * self.rate_hz))
-        start = _first_run(still, need)
+        start = _first_run(self._quiet(batch), need)
         if start < 0:
             keep = round(self.config.max_wait_s * self.rate_hz)
             if len(batch) > keep:  # bound memory while the unit never rests
                 drop = len(batch) - keep
                 self.stats.samples_before_alignment += drop
-                batch, stat, still = _tail(batch, drop), stat[drop:], still[drop:]
-            self._pending = [(batch, stat, still)]
+                batch, stat, threshold, still = _tail(batch, drop), stat[drop:], threshold[drop:], still[drop:]
+            self._pending = [(batch, stat, threshold, still)]
             return None
         self._pending = []
         self.stats.samples_before_alignment += start
@@ -153,8 +160,7 @@ class Navigator:
         al = align_from_still(batch.acc_b_mps2[window], batch.gyr_b_radps[window])
         cfg, prof = self.config, self.config.profile
         x = np.zeros(16)
-        x[6:10] = al.quat_nb_wxyz
-        x[13:16] = al.gyr_bias_radps
+        x[6:10] = al.quat_nb_wxyz  # biases start at the profile's prior, 0: a quiet foot may still turn
         self._x = x
         sig = np.concatenate(
             [
@@ -170,9 +176,24 @@ class Navigator:
         self.stats.aligned_at_s = float(batch.t_s[start])
         self._t_last = float(batch.t_s[start]) - 1.0 / self.rate_hz  # one nominal interval before
         rest = _tail(batch, start)
-        return self._run(rest, stat[start:], still[start:])
+        return self._run(rest, stat[start:], threshold[start:], still[start:])
 
-    def _run(self, batch: ImuBatch, stat: F64, still: NDArray[np.bool_]) -> NavBatch:
+    def _quiet(self, batch: ImuBatch) -> NDArray[np.bool_]:
+        """Samples quiet enough to align on (see ``NavConfig``)."""
+        cfg = self.config
+        norm_f = np.linalg.norm(batch.acc_b_mps2, axis=1)
+        rate = np.linalg.norm(batch.gyr_b_radps, axis=1)
+        need = max(2, round(cfg.align_s * self.rate_hz))
+        kernel = np.ones(need) / need
+        # the centred window's mean |f|, normalised at the ends where the window is cut short
+        mean_f = np.convolve(norm_f, kernel, mode="same") / np.convolve(np.ones_like(norm_f), kernel, mode="same")
+        with np.errstate(invalid="ignore"):
+            quiet: NDArray[np.bool_] = (rate < cfg.align_max_rate_radps) & (
+                np.abs(norm_f - mean_f) < cfg.align_max_acc_dev_mps2
+            )
+        return quiet
+
+    def _run(self, batch: ImuBatch, stat: F64, threshold: F64, still: NDArray[np.bool_]) -> NavBatch:
         assert self._x is not None
         n = len(batch)
         dt = np.diff(batch.t_s, prepend=self._t_last)
@@ -207,7 +228,7 @@ class Navigator:
             pos_cov_n_m2=pos_cov,
             stance=still,
             detector_stat=stat,
-            detector_threshold=self.detector.threshold,
+            detector_threshold=threshold,
             clearance_m=pos[:, 2].copy(),
             host_ns=batch.host_ns,
         )

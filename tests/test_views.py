@@ -68,7 +68,7 @@ def synth_walk(n: int, rng: np.random.Generator) -> NavBatch:
         pos_cov_n_m2=cov,
         stance=stance,
         detector_stat=np.where(stance, 1e4, 1e7),
-        detector_threshold=3e5,
+        detector_threshold=np.full(n, 3e5),
         clearance_m=clearance,
         host_ns=(t * 1e9).astype(np.int64),
     )
@@ -84,7 +84,7 @@ def split(nav: NavBatch, size: int) -> list[NavBatch]:
             pos_cov_n_m2=nav.pos_cov_n_m2[s : s + size],
             stance=nav.stance[s : s + size],
             detector_stat=nav.detector_stat[s : s + size],
-            detector_threshold=nav.detector_threshold,
+            detector_threshold=nav.detector_threshold[s : s + size],
             clearance_m=nav.clearance_m[s : s + size],
             host_ns=nav.host_ns[s : s + size],
         )

@@ -103,7 +103,7 @@ def pos_sigmas(cov: F64) -> F64:
 
 
 def concat_batches(batches: Sequence[NavBatch]) -> NavBatch:
-    """Join consecutive batches into one (the detector threshold of the last batch is kept)."""
+    """Join consecutive batches into one (a scalar detector threshold: the last batch's is kept)."""
     if len(batches) == 1:
         return batches[0]
     if not batches:
@@ -116,7 +116,7 @@ def concat_batches(batches: Sequence[NavBatch]) -> NavBatch:
         pos_cov_n_m2=np.concatenate([b.pos_cov_n_m2 for b in batches]),
         stance=np.concatenate([b.stance for b in batches]),
         detector_stat=np.concatenate([b.detector_stat for b in batches]),
-        detector_threshold=batches[-1].detector_threshold,
+        detector_threshold=np.concatenate([np.broadcast_to(b.detector_threshold, (len(b),)) for b in batches]),
         clearance_m=np.concatenate([b.clearance_m for b in batches]),
         host_ns=np.concatenate([b.host_ns for b in batches]),
     )
@@ -137,6 +137,8 @@ class NavArrays:
         clearance: (n,) float64, m.
         pos_sigma: (n, 4) float64 ``[σx, σy, σz, sqrt(trace)]``, m.
         detector: (n, 2) float64 ``[statistic, threshold]``.
+        speed: (n,) float64 horizontal speed, m/s.
+        heading: (n,) float64 heading, degrees in (−180, 180].
     """
 
     t_s: F64
@@ -149,6 +151,8 @@ class NavArrays:
     clearance: F64
     pos_sigma: F64
     detector: F64
+    speed: F64
+    heading: F64
 
 
 def nav_arrays(nav: NavBatch, *, sigma_scale: float = DEFAULT_SIGMA_SCALE) -> NavArrays:
@@ -167,10 +171,61 @@ def nav_arrays(nav: NavBatch, *, sigma_scale: float = DEFAULT_SIGMA_SCALE) -> Na
         clearance=np.asarray(nav.clearance_m, dtype=np.float64),
         pos_sigma=pos_sigmas(nav.pos_cov_n_m2),
         detector=np.stack(
-            [np.asarray(nav.detector_stat, dtype=np.float64), np.full(n, float(nav.detector_threshold))],
+            [
+                np.asarray(nav.detector_stat, dtype=np.float64),
+                np.broadcast_to(np.asarray(nav.detector_threshold, dtype=np.float64), (n,)),
+            ],
             axis=-1,
         ),
+        speed=np.hypot(nav.vel_n_mps[:, 0], nav.vel_n_mps[:, 1]).astype(np.float64),
+        heading=heading_deg(nav.quat_nb_wxyz),
     )
+
+
+def heading_deg(quat_nb_wxyz: F64) -> F64:
+    """Heading (n,) in degrees, (−180, 180]: the yaw of the body x axis in the navigation frame,
+    counter-clockwise from the navigation x axis (the start direction), from (n, 4) ``wxyz``."""
+    q = np.asarray(quat_nb_wxyz, dtype=np.float64)
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.degrees(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def step_onsets(stance: NDArray[np.bool_], previous: bool | None) -> NDArray[np.intp]:
+    """Indices (k,) where a step lands: stance after swing (``previous``: the flag before sample 0;
+    ``None`` at the start of a session, where standing still is the start, not a step)."""
+    s = np.asarray(stance, dtype=bool)
+    if s.size == 0:
+        return np.zeros(0, dtype=np.intp)
+    before = np.empty(s.shape, dtype=bool)
+    before[0] = True if previous is None else previous
+    before[1:] = s[:-1]
+    return np.flatnonzero(s & ~before)
+
+
+STEP_ELLIPSE_HALF_THICKNESS_M = 0.0005
+"""Step ellipses are flat discs this thick (half), drawn on the floor under the step marker."""
+
+
+def floor_ellipses(cov: F64, *, sigma_scale: float = DEFAULT_SIGMA_SCALE) -> tuple[F64, F64]:
+    """Flat ellipses of the horizontal 2×2 block of (n, 3, 3) position covariances.
+
+    Returns:
+        half_sizes (n, 3): ``sigma_scale·sqrt(eigenvalue)`` along the ellipse axes and a thin z,
+        and quat_xyzw (n, 4): the rotation about z taking the x axis to the major axis.
+    """
+    p = np.asarray(cov, dtype=np.float64)[:, :2, :2]
+    p = 0.5 * (p + np.swapaxes(p, -1, -2))
+    p = np.where(np.isfinite(p).all(axis=(-1, -2))[:, None, None], p, 0.0)
+    evals, evecs = np.linalg.eigh(p)  # ascending: column 1 is the major axis
+    angle = np.arctan2(evecs[:, 1, 1], evecs[:, 0, 1])
+    half = np.empty((p.shape[0], 3))
+    half[:, 0] = sigma_scale * np.sqrt(np.clip(evals[:, 1], 0.0, None))
+    half[:, 1] = sigma_scale * np.sqrt(np.clip(evals[:, 0], 0.0, None))
+    half[:, 2] = STEP_ELLIPSE_HALF_THICKNESS_M
+    quat = np.zeros((p.shape[0], 4))
+    quat[:, 2] = np.sin(angle / 2.0)
+    quat[:, 3] = np.cos(angle / 2.0)
+    return half, quat
 
 
 def stance_transitions(stance: NDArray[np.bool_], previous: bool | None) -> NDArray[np.intp]:
@@ -190,13 +245,19 @@ def time_column(t_s: F64) -> rr.TimeColumn:
 
 
 def nav_columns(
-    arrays: NavArrays, paths: FootPaths, *, ellipsoid_every: int = 1, first_index: int = 0
+    arrays: NavArrays,
+    paths: FootPaths,
+    *,
+    ellipsoid_every: int = 1,
+    first_index: int = 0,
+    series_every: int = 1,
 ) -> list[SendColumns]:
     """``(entity, index, columns)`` triples for ``send_columns``, one per displayed entity.
 
     Every sample is logged for track, pose, stance, clearance, sigma and detector. The ellipsoid is
     logged for samples whose running index (``first_index`` + row) is a multiple of
-    ``ellipsoid_every`` (1 = every sample, 0 = never), so decimation does not depend on batch borders.
+    ``ellipsoid_every`` (1 = every sample, 0 = never), so decimation does not depend on batch borders;
+    speed and heading likewise every ``series_every``-th sample.
     """
     index = time_column(arrays.t_s)
     out: list[SendColumns] = [
@@ -207,6 +268,12 @@ def nav_columns(
         (paths.pos_sigma, index, rr.Scalars.columns(scalars=arrays.pos_sigma)),
         (paths.detector, index, rr.Scalars.columns(scalars=arrays.detector)),
     ]
+    if series_every >= 1:
+        sl_s = slice((-first_index) % series_every, None, series_every)
+        if arrays.t_s[sl_s].size:
+            s_index = index if series_every == 1 else time_column(arrays.t_s[sl_s])
+            out.append((paths.speed, s_index, rr.Scalars.columns(scalars=arrays.speed[sl_s])))
+            out.append((paths.heading, s_index, rr.Scalars.columns(scalars=arrays.heading[sl_s])))
     if ellipsoid_every < 1:
         return out
     sl = slice((-first_index) % ellipsoid_every, None, ellipsoid_every)
@@ -229,3 +296,24 @@ def gait_columns(
         return None
     states = np.where(np.asarray(stance, dtype=bool)[idx], STANCE_STATE, SWING_STATE).tolist()
     return paths.gait, time_column(np.asarray(t_s)[idx]), rr.StateChange.columns(state=states)
+
+
+def step_columns(
+    arrays: NavArrays, cov: F64, onsets: NDArray[np.intp], paths: FootPaths, *, sigma_scale: float
+) -> list[SendColumns]:
+    """Step markers and their floor ellipses at the given sample indices (empty list if none)."""
+    if onsets.size == 0:
+        return []
+    index = time_column(arrays.t_s[onsets])
+    pos = arrays.pos[onsets]
+    half, quat = floor_ellipses(np.asarray(cov)[onsets], sigma_scale=sigma_scale)
+    return [
+        (paths.steps, index, rr.Points3D.columns(positions=pos)),
+        (
+            paths.step_cov,
+            index,
+            rr.Ellipsoids3D.columns(
+                centers=pos, half_sizes=half.astype(np.float32), quaternions=quat.astype(np.float32)
+            ),
+        ),
+    ]
