@@ -41,8 +41,18 @@ N_STATE = 15
 P0, V0, TH0, BA0, BG0 = 0, 3, 6, 9, 12
 
 # layout of the parameter vector handed to the compiled loop
-(PAR_SIG_ACC, PAR_SIG_GYR, PAR_BA_RW, PAR_BG_RW, PAR_ZUPT, PAR_ZARU, PAR_G, PAR_DT_MAX, PAR_ZARU_GATE,
- PAR_ROLL_LEVER) = range(10)
+(
+    PAR_SIG_ACC,
+    PAR_SIG_GYR,
+    PAR_BA_RW,
+    PAR_BG_RW,
+    PAR_ZUPT,
+    PAR_ZARU,
+    PAR_G,
+    PAR_DT_MAX,
+    PAR_ZARU_GATE,
+    PAR_ROLL_LEVER,
+) = range(10)
 N_PAR = 10
 
 # counters returned by run_filter

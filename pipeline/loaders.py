@@ -76,7 +76,9 @@ def load_pyshoe_mat(path: Path) -> Recording:
         raise InputFormatError(f"{path}: not a MATLAB .mat file readable as a PyShoe trial ({exc})") from None
     missing = [k for k in ("ts", "imu") if k not in mat]
     if missing:
-        raise InputFormatError(f"{path}: a PyShoe trial needs fields ts and imu; missing {', '.join(missing)}")
+        raise InputFormatError(
+            f"{path}: a PyShoe trial needs fields ts and imu; missing {', '.join(missing)}"
+        )
     t = np.asarray(mat["ts"], dtype=np.float64).ravel()
     imu = np.asarray(mat["imu"], dtype=np.float64)
     if imu.ndim != 2 or imu.shape != (t.size, 6):
@@ -92,14 +94,26 @@ def load_pyshoe_mat(path: Path) -> Recording:
             gt = None
             notes.append("ground truth length differs from the IMU's; ignored")
     return Recording(
-        name=path.stem, format="pyshoe", t_s=t - t[0], acc_b_mps2=imu[:, :3].copy(), gyr_b_radps=imu[:, 3:].copy(),
-        rate_hz=_nominal_rate(t), profile="gx3", gt_pos_m=gt, notes=notes,
+        name=path.stem,
+        format="pyshoe",
+        t_s=t - t[0],
+        acc_b_mps2=imu[:, :3].copy(),
+        gyr_b_radps=imu[:, 3:].copy(),
+        rate_hz=_nominal_rate(t),
+        profile="gx3",
+        gt_pos_m=gt,
+        notes=notes,
     )
 
 
 XIO_COLUMNS = (
-    "Time (s)", "Gyroscope X (deg/s)", "Gyroscope Y (deg/s)", "Gyroscope Z (deg/s)",
-    "Accelerometer X (g)", "Accelerometer Y (g)", "Accelerometer Z (g)",
+    "Time (s)",
+    "Gyroscope X (deg/s)",
+    "Gyroscope Y (deg/s)",
+    "Gyroscope Z (deg/s)",
+    "Accelerometer X (g)",
+    "Accelerometer Y (g)",
+    "Accelerometer Z (g)",
 )
 
 
@@ -111,12 +125,20 @@ def load_xio_csv(path: Path) -> Recording:
     """
     header = _csv_header(path)
     if tuple(h.strip() for h in header[: len(XIO_COLUMNS)]) != XIO_COLUMNS:
-        raise InputFormatError(f"{path}: expected an x-io CSV with columns {', '.join(XIO_COLUMNS)}; got {header}")
+        raise InputFormatError(
+            f"{path}: expected an x-io CSV with columns {', '.join(XIO_COLUMNS)}; got {header}"
+        )
     data = _read_numeric_csv(path, skip=1, ncols=7)
     t = data[:, 0]
     return Recording(
-        name=path.stem, format="xio", t_s=t - t[0], acc_b_mps2=data[:, 4:7] * G0_MPS2,
-        gyr_b_radps=data[:, 1:4] * DEG, rate_hz=_nominal_rate(t), profile="generic", closed_loop=True,
+        name=path.stem,
+        format="xio",
+        t_s=t - t[0],
+        acc_b_mps2=data[:, 4:7] * G0_MPS2,
+        gyr_b_radps=data[:, 1:4] * DEG,
+        rate_hz=_nominal_rate(t),
+        profile="generic",
+        closed_loop=True,
         notes=["x-io sample walk: the foot ends where it started"],
     )
 
@@ -149,8 +171,15 @@ def load_openshoe_txt(path: Path) -> Recording:
     if skipped:
         notes.append(f"{skipped} malformed rows skipped")
     return Recording(
-        name=path.stem, format="openshoe", t_s=t - t[0], acc_b_mps2=data[:, 0:3] * G0_MPS2,
-        gyr_b_radps=data[:, 3:6].copy(), rate_hz=_nominal_rate(t), profile="gx3", closed_loop=True, notes=notes,
+        name=path.stem,
+        format="openshoe",
+        t_s=t - t[0],
+        acc_b_mps2=data[:, 0:3] * G0_MPS2,
+        gyr_b_radps=data[:, 3:6].copy(),
+        rate_hz=_nominal_rate(t),
+        profile="gx3",
+        closed_loop=True,
+        notes=notes,
     )
 
 
@@ -193,7 +222,9 @@ class CsvMapping:
             elif key in ("acc", "gyr"):
                 cols = tuple(names.split(";"))
                 if len(cols) != 3:
-                    raise InputFormatError(f"--columns {key}= needs three column names separated by ';', got {names!r}")
+                    raise InputFormatError(
+                        f"--columns {key}= needs three column names separated by ';', got {names!r}"
+                    )
                 fields[key] = cols
                 if unit:
                     fields[f"{key}_unit"] = unit
@@ -202,26 +233,39 @@ class CsvMapping:
             elif key == "closed_loop":
                 fields["closed_loop"] = value.lower() in ("1", "true", "yes")
             else:
-                raise InputFormatError(f"unknown --columns key {key!r}; use time, acc, gyr, profile, closed_loop")
+                raise InputFormatError(
+                    f"unknown --columns key {key!r}; use time, acc, gyr, profile, closed_loop"
+                )
         return CsvMapping(**fields)  # type: ignore[arg-type]
 
 
 def load_generic_csv(path: Path, mapping: CsvMapping | None = None) -> Recording:
     """A CSV with a header row; ``mapping`` says which columns and units (default t, ax.., gx.. in SI)."""
     m = mapping or CsvMapping()
-    for unit, table, what in ((m.time_unit, TIME_UNITS, "time"), (m.acc_unit, ACC_UNITS, "acc"), (m.gyr_unit, GYR_UNITS, "gyr")):
+    for unit, table, what in (
+        (m.time_unit, TIME_UNITS, "time"),
+        (m.acc_unit, ACC_UNITS, "acc"),
+        (m.gyr_unit, GYR_UNITS, "gyr"),
+    ):
         if unit not in table:
             raise InputFormatError(f"unknown {what} unit {unit!r}; known: {', '.join(table)}")
     header = [h.strip() for h in _csv_header(path)]
     wanted = [m.time, *m.acc, *m.gyr]
     missing = [c for c in wanted if c not in header]
     if missing:
-        raise InputFormatError(f"{path}: columns {', '.join(missing)} not found; the header has {', '.join(header)}")
+        raise InputFormatError(
+            f"{path}: columns {', '.join(missing)} not found; the header has {', '.join(header)}"
+        )
     data = _read_numeric_csv(path, skip=1, ncols=len(header))[:, [header.index(c) for c in wanted]]
     t = data[:, 0] * TIME_UNITS[m.time_unit]
     return Recording(
-        name=path.stem, format="csv", t_s=t - t[0], acc_b_mps2=data[:, 1:4] * ACC_UNITS[m.acc_unit],
-        gyr_b_radps=data[:, 4:7] * GYR_UNITS[m.gyr_unit], rate_hz=_nominal_rate(t), profile=m.profile,
+        name=path.stem,
+        format="csv",
+        t_s=t - t[0],
+        acc_b_mps2=data[:, 1:4] * ACC_UNITS[m.acc_unit],
+        gyr_b_radps=data[:, 4:7] * GYR_UNITS[m.gyr_unit],
+        rate_hz=_nominal_rate(t),
+        profile=m.profile,
         closed_loop=m.closed_loop,
     )
 
@@ -240,7 +284,9 @@ def _read_numeric_csv(path: Path, skip: int, ncols: int) -> F64:
     except ValueError as exc:
         raise InputFormatError(f"{path}: non-numeric values in the data rows ({exc})") from None
     if data.shape[1] < ncols or data.shape[0] < 2:
-        raise InputFormatError(f"{path}: expected at least 2 rows of {ncols} numeric columns, got {data.shape}")
+        raise InputFormatError(
+            f"{path}: expected at least 2 rows of {ncols} numeric columns, got {data.shape}"
+        )
     out: F64 = data
     return out
 

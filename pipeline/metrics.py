@@ -65,7 +65,10 @@ def _align_4dof(est: F64, gt: F64) -> tuple[F64, float]:
     mu_e, mu_g = est.mean(axis=0), gt.mean(axis=0)
     e, g = est - mu_e, gt - mu_g
     # maximise Σ gᵀ R(ψ) e over ψ: tan ψ = Σ(e_x g_y − e_y g_x) / Σ(e_x g_x + e_y g_y)
-    yaw = math.atan2(float(np.sum(e[:, 0] * g[:, 1] - e[:, 1] * g[:, 0])), float(np.sum(e[:, 0] * g[:, 0] + e[:, 1] * g[:, 1])))
+    yaw = math.atan2(
+        float(np.sum(e[:, 0] * g[:, 1] - e[:, 1] * g[:, 0])),
+        float(np.sum(e[:, 0] * g[:, 0] + e[:, 1] * g[:, 1])),
+    )
     aligned = e @ _rot_z(yaw).T + mu_g
     return aligned, yaw
 

@@ -151,7 +151,12 @@ class Navigator:
             if len(batch) > keep:  # bound memory while the unit never rests
                 drop = len(batch) - keep
                 self.stats.samples_before_alignment += drop
-                batch, stat, threshold, still = _tail(batch, drop), stat[drop:], threshold[drop:], still[drop:]
+                batch, stat, threshold, still = (
+                    _tail(batch, drop),
+                    stat[drop:],
+                    threshold[drop:],
+                    still[drop:],
+                )
             self._pending = [(batch, stat, threshold, still)]
             return None
         self._pending = []
@@ -186,7 +191,9 @@ class Navigator:
         need = max(2, round(cfg.align_s * self.rate_hz))
         kernel = np.ones(need) / need
         # the centred window's mean |f|, normalised at the ends where the window is cut short
-        mean_f = np.convolve(norm_f, kernel, mode="same") / np.convolve(np.ones_like(norm_f), kernel, mode="same")
+        mean_f = np.convolve(norm_f, kernel, mode="same") / np.convolve(
+            np.ones_like(norm_f), kernel, mode="same"
+        )
         with np.errstate(invalid="ignore"):
             quiet: NDArray[np.bool_] = (rate < cfg.align_max_rate_radps) & (
                 np.abs(norm_f - mean_f) < cfg.align_max_acc_dev_mps2
