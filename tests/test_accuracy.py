@@ -1,0 +1,51 @@
+"""Accuracy with the one default configuration: real recordings and long emulated walks.
+
+The real-data bounds guard against regressions at the level measured when they were written (see the
+README's accuracy table); the issue's targets are tighter and are reported by ``footnav evaluate``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.evaluate import format_table, run_evaluate
+from device.emulator.gait import simulate_walk
+from device.emulator.imu_errors import corrupt
+from pipeline.navigator import NavConfig, navigate
+from pipeline.profiles import get_profile
+
+
+@pytest.fixture(scope="module")
+def evaluations(shared_data: Path):  # type: ignore[no-untyped-def]
+    rows, problems = run_evaluate([shared_data])
+    print(format_table(rows))
+    assert not problems
+    return {r.name: r for r in rows}
+
+
+def test_pyshoe_vicon_trials(evaluations) -> None:  # type: ignore[no-untyped-def]
+    armse = np.array([r.armse_2d_m for r in evaluations.values() if r.format == "pyshoe"])
+    assert armse.size == 9
+    assert armse.mean() <= 0.13 and armse.max() <= 0.40
+    # pyshoe with one fixed threshold averages 2.29 m on this dataset (DATA.md)
+    assert np.median(armse) <= 0.09
+
+
+def test_closed_loops(evaluations) -> None:  # type: ignore[no-untyped-def]
+    xio, openshoe = evaluations["short_walk"], evaluations["data_inert"]
+    assert xio.loop_2d_m <= 0.08 and xio.loop_3d_m <= 0.5
+    assert openshoe.loop_2d_m <= 0.25 and openshoe.loop_3d_m <= 1.0
+
+
+@pytest.mark.parametrize("path", ["rectangle", "figure8"])
+def test_emulated_walk_of_several_minutes(path: str) -> None:
+    truth = simulate_walk(path, 240.0, rate_hz=1000.0, seed=0)
+    acc, gyr, _ = corrupt(truth.acc_b_mps2, truth.gyr_b_radps, truth.rate_hz, "mpu6500x4", seed=7)
+    nav, stats = navigate(truth.t_s, acc, gyr, truth.rate_hz, NavConfig(profile=get_profile("mpu6500x4")))
+    assert nav is not None and stats.samples_before_alignment == 0
+    error_m = float(np.linalg.norm(nav.pos_n_m[-1] - truth.pos_n_m[-1]))
+    assert truth.distance_m > 250
+    assert error_m / truth.distance_m <= 0.003  # issue 4: at most 0.3 % of distance

@@ -1,0 +1,53 @@
+"""``footnav export`` and ``footnav evaluate`` from the command line, on real recordings."""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from app.export import EXPORT_COLUMNS
+
+
+def _footnav(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "app", *args], capture_output=True, text=True, timeout=300, check=False
+    )
+
+
+def test_export_writes_one_row_per_sample(tmp_path: Path, shared_data: Path) -> None:
+    out = tmp_path / "track.csv"
+    proc = _footnav("export", str(shared_data / "xio-gait-tracking" / "short_walk.csv"), "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    with out.open() as f:
+        rows = list(csv.reader(f))
+    assert tuple(rows[0]) == EXPORT_COLUMNS
+    data = np.array(rows[1:], dtype=float)
+    assert data.shape == (16539, len(EXPORT_COLUMNS))
+    q = data[:, 7:11]
+    np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-6)
+    assert set(np.unique(data[:, 11])) == {0.0, 1.0}
+    assert (data[:, 12:15] > 0).all()
+    np.testing.assert_allclose(data[0, 1:4], 0.0, atol=1e-3)  # origin at the start
+
+
+def test_export_of_a_wrong_file_names_the_formats(tmp_path: Path) -> None:
+    bad = tmp_path / "photo.jpg"
+    bad.write_bytes(b"\xff\xd8\xff\xe0garbage")
+    proc = _footnav("export", str(bad), "-o", str(tmp_path / "x.csv"))
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "expected a PyShoe .mat, an x-io CSV" in proc.stderr
+
+
+def test_evaluate_prints_a_table_and_summary(shared_data: Path) -> None:
+    proc = _footnav(
+        "evaluate",
+        str(shared_data / "openshoe"),
+        str(shared_data / "pyshoe-vicon" / "2017-11-22-11-22-03.mat"),
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "ARMSE2D" in proc.stdout and "data_inert" in proc.stdout and "2017-11-22-11-22-03" in proc.stdout
+    assert "ground truth (1 files)" in proc.stdout and "closed loops (1 files)" in proc.stdout
