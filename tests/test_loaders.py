@@ -72,7 +72,7 @@ def test_generic_csv_names_missing_columns(tmp_path: Path) -> None:
 def test_unknown_file_names_the_expected_formats(tmp_path: Path) -> None:
     path = tmp_path / "notes.txt"
     path.write_text("hello\n")
-    with pytest.raises(InputFormatError, match="PyShoe .mat, an x-io CSV, an OpenShoe"):
+    with pytest.raises(InputFormatError, match=r"PyShoe \.mat, an x-io CSV, an OpenShoe"):
         load_recording(path)
 
 

@@ -26,7 +26,7 @@ def test_rotated_copy_scores_zero() -> None:
     gt = _square()
     est = gt @ _rot(0.7).T
     assert armse_2d_pyshoe(est, gt) == pytest.approx(0.0, abs=1e-12)
-    res = ate(est + [3.0, -2.0, 0.5], gt)
+    res = ate(est + np.array([3.0, -2.0, 0.5]), gt)
     assert res.rmse_3d_m == pytest.approx(0.0, abs=1e-12) and not res.mirrored
 
 
