@@ -167,3 +167,57 @@ class CounterTracker:
         self._last_raw = int(raw[-1])
         self._last_total = int(total[-1])
         return total, dup
+
+
+def frame_payload_rows(numbers: NDArray[np.integer], rows: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """Frame m equal-length payloads at once: ``AA hi lo N payload chk_hi chk_lo`` per row.
+
+    Args:
+        numbers: (m,) package numbers, taken modulo 2**16.
+        rows: (m, L) payload bytes, L <= 255.
+
+    Returns:
+        (m, L + 6) packet bytes; ``.tobytes()`` is the byte stream.
+    """
+    rows = np.asarray(rows, dtype=np.uint8)
+    m, length = rows.shape
+    if length > 0xFF:
+        raise ValueError(f"a data packet holds at most 255 payload bytes, got {length}")
+    out = np.empty((m, length + 6), dtype=np.uint8)
+    num = np.asarray(numbers, dtype=np.int64) % COUNTER_WRAP
+    out[:, 0] = 0xAA
+    out[:, 1] = num >> 8
+    out[:, 2] = num & 0xFF
+    out[:, 3] = length
+    out[:, 4 : 4 + length] = rows
+    chk = out[:, : length + 4].sum(axis=1, dtype=np.uint32) & 0xFFFF
+    out[:, length + 4] = chk >> 8
+    out[:, length + 5] = chk & 0xFF
+    return out
+
+
+class SharedTickClock:
+    """Unwraps 64 MHz ticks from several packet kinds sharing one device clock.
+
+    Unlike :class:`TickUnwrapper`, each step is taken as a *signed* difference modulo 2**32, so ticks
+    from interleaved outputs (an IMU sample, then a ToF reading stamped a little earlier) may step back
+    slightly; the price is that a silence longer than half a wrap (≈33.5 s) is ambiguous. Feed ticks
+    in arrival order, all kinds through the same instance: every kind then shares one time origin.
+    """
+
+    def __init__(self) -> None:
+        self._last_raw: int | None = None
+        self._last_total = 0
+
+    def update(self, ticks: NDArray[np.integer]) -> NDArray[np.float64]:
+        """Return (n,) device time in seconds for ``ticks`` (n,) in arrival order."""
+        raw = np.asarray(ticks, dtype=np.int64)
+        if raw.size == 0:
+            return np.empty(0, dtype=np.float64)
+        if self._last_raw is None:
+            self._last_raw = self._last_total = int(raw[0])
+        steps = (np.diff(raw, prepend=self._last_raw) + TICK_WRAP // 2) % TICK_WRAP - TICK_WRAP // 2
+        total = self._last_total + np.cumsum(steps)
+        self._last_raw = int(raw[-1])
+        self._last_total = int(total[-1])
+        return total / TICK_HZ

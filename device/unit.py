@@ -1,33 +1,65 @@
-"""An OpenShoe/MIMU/Oblu unit (2015 firmware) streaming normal-IMU packets over a byte link.
+"""An OpenShoe/MIMU/Oblu unit on a byte link: firmware probe, every output mode, typed batches.
 
-Start: ``40 mode chk`` and wait for ``A0 40 ..``; stream: 34-byte packets decoded in batches; stop:
-``32 00 32`` (processing off) then ``22 00 22`` (outputs off), as the vendor host apps do
-(protocol-openshoe.md sections 0, 3.5, 5.3, 9).
+Start (protocol-openshoe.md sections 3, 5, 6, 10):
+
+- the firmware generation is probed first (section 3.3): a 2015 command that 2014 firmware drops
+  unparsed is sent (the requested mode's own start command when it is such a command: ``34``, ``40``,
+  ``41``, ``33``; otherwise ``32 00 32``); if it is not ACKed within the probe time-out, the 2014 command
+  ``14 00 14`` (stepwise dead reckoning) or ``27 00 27`` (processing off), which 2015 firmware drops, is
+  sent instead. From then on every command comes from the detected set's builder and
+  :meth:`OpenShoeUnit._send` refuses a command of the other set;
+- modes: :class:`NormalImuMode` (0x40/0x41), :class:`RawImuMode` (``30 13 00`` then 0x28),
+  :class:`InsMode` (``33 00 33`` then OUTPUT_STATE(S)), :class:`StepwiseMode` (0x34, or 0x14 on 2014
+  firmware), plus the extension states (:meth:`OpenShoeUnit.enable_extensions`, see
+  :mod:`device.extensions`);
+- in lossless mode (forced by SWDR) every data packet is ACKed, resends included (section 6).
+
+Stream: each read's packets become typed batches (:data:`Batch`), duplicates dropped, the package
+number tracked over all packets of the interface (one counter is shared by every output), the 64 MHz
+tick counter unwrapped on one clock for every packet kind. Packets of unknown length or kind are
+counted and logged once per length, never fatal.
+
+Stop: processing off then outputs off of the detected set (``32``/``22``, or ``27``/``21``), as the
+vendor host apps do.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import logging
 import time
-from collections.abc import AsyncIterator, Callable
-from dataclasses import dataclass
+from collections.abc import AsyncGenerator, Callable
+from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Final, Literal, Protocol, Self
 
 import numpy as np
 
-from device import protocol
+from device import extensions, ins_states, raw_imu, stepwise
+from device import protocol as p
+from device.extensions import BaroBatch, TofBatch
 from device.framer import DataPacket, DeviceAck, Framer
-from device.imu_packets import PAYLOAD_LEN, CounterTracker, TickUnwrapper, decode_payloads
-from pipeline.errors import DeviceError
+from device.imu_packets import PAYLOAD_LEN, CounterTracker, SharedTickClock, decode_payloads
+from device.ins_states import InsLayout, InsStateBatch
+from device.raw_imu import RawImuBatch, RawImuLayout
+from device.stepwise import StepBatch, StepwiseTracker
+from pipeline.errors import DeviceError, ProtocolError
 from pipeline.samples import ImuBatch
+
+log = logging.getLogger(__name__)
 
 START_TIMEOUT_S: Final = 3.0
 STOP_TIMEOUT_S: Final = 1.0
+PROBE_TIMEOUT_S: Final = 1.0
+"""How long the probe waits for the 2015 ACK before trying the 2014 set."""
 _MAX_REMEMBERED_ACKS: Final = 16
 
 CaptureTap = Callable[[Literal["rx", "tx"], int, bytes], None]
 """``tap(direction, host_ns, data)``: sees every byte read or written, before any decoding."""
+
+Batch = ImuBatch | RawImuBatch | InsStateBatch | StepBatch | TofBatch | BaroBatch
+"""What :meth:`OpenShoeUnit.batches` yields."""
 
 
 class ByteLink(Protocol):
@@ -51,6 +83,46 @@ class ByteLink(Protocol):
         ...
 
 
+# --- output modes --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class NormalImuMode:
+    """Calibrated IMU (0x40, or 0x41 with on-board gyro-bias estimation), 34-byte packets."""
+
+    rate_divider_log2: int = 0
+    bias_estimation: bool = False
+    lossless: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class RawImuMode:
+    """Raw int16 registers of the IMUs in ``imu_mask`` (0x28); ``raw_imu.DUAL_IMU_MASK``: the dual board."""
+
+    imu_mask: int = 0x0F
+    rate_divider_log2: int = 0
+    lossless: bool = False
+    temperature: bool = False
+    magnetometer: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class InsMode:
+    """On-board ZUPT-aided INS states (0x33, then OUTPUT_STATE(S)); keep the unit still at the start."""
+
+    state_ids: tuple[int, ...] = ins_states.DEFAULT_INS_STATES
+    rate_divider_log2: int = 2
+    lossless: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class StepwiseMode:
+    """Stepwise dead reckoning (0x34; 0x14 on 2014 firmware): one lossless 64-byte packet per step."""
+
+
+Mode = NormalImuMode | RawImuMode | InsMode | StepwiseMode
+
+
 @dataclass(frozen=True, slots=True)
 class LinkStats:
     """Counts since the unit object was created. Corruption is counted, never fatal."""
@@ -68,39 +140,74 @@ class LinkStats:
     lost_packets: int
     """Packets missing according to package-number gaps."""
     duplicates: int
-    """Packets that repeated the previous package number (dropped from the batches)."""
+    """Packets that repeated the previous package number (resends; dropped from the batches)."""
     out_of_order: int
     """Package numbers that stepped backwards."""
     unexpected_packets: int
-    """Valid packets that are not normal-IMU packets (ignored)."""
+    """Valid packets of no active kind or of an unknown length (counted, logged once per length)."""
     bytes_received: int
     samples: int
-    """IMU samples yielded in batches."""
+    """Records yielded in batches (IMU samples, INS states, steps, ToF and barometer readings)."""
+    acks_sent: int = 0
+    """Host ACKs of data packets sent (lossless mode), resends included."""
+    firmware: str = ""
+    """Detected command set ("2015" or "2014"), "" before the probe."""
+
+
+@dataclass
+class _Decoded:
+    """Payloads of one read, by kind, in arrival order; ``host_ns`` of the read."""
+
+    host_ns: int
+    normal: list[tuple[int, bytes]] = field(default_factory=list)
+    raw: list[tuple[int, bytes]] = field(default_factory=list)
+    ins: list[tuple[int, bytes]] = field(default_factory=list)
+    steps: list[tuple[int, bytes]] = field(default_factory=list)
+    tof: list[tuple[int, bytes]] = field(default_factory=list)
+    baro: list[tuple[int, bytes]] = field(default_factory=list)
 
 
 class OpenShoeUnit:
-    """Normal-IMU streaming from one unit.
+    """One unit: probe, start a mode, stream typed batches, stop.
 
     Args:
         link: an open byte link (e.g. :class:`device.serial_link.SerialLink`).
         capture: optional tap called with every chunk read and written (for the capture file).
+        command_set: the firmware's command set if known (skips the probe).
     """
 
-    def __init__(self, link: ByteLink, *, capture: CaptureTap | None = None) -> None:
+    def __init__(
+        self, link: ByteLink, *, capture: CaptureTap | None = None, command_set: p.CommandSet | None = None
+    ) -> None:
         self.link = link
         self._capture = capture
-        self._framer = Framer(accepted_lengths=(PAYLOAD_LEN,))
-        self._ticks = TickUnwrapper()
+        self._framer = Framer()
+        self._clock = SharedTickClock()
         self._counters = CounterTracker()
-        self._pending: list[tuple[int, list[bytes], list[int]]] = []
+        self._pending: list[list[Batch]] = []
         self._acks: list[int] = []
         self._bytes_received = 0
         self._unexpected = 0
+        self._unknown_lengths_logged: set[int] = set()
         self._samples = 0
+        self._acks_sent = 0
+        self._unacked: list[int] = []
         self._iterating = False
+        self._commands: p.CommandBuilder | None = None if command_set is None else p.commands_for(command_set)
+        self._mode: Mode | None = None
+        self._raw_layout: RawImuLayout | None = None
+        self._ins_layout: InsLayout | None = None
+        self._lossless = False
+        self._extensions: set[int] = set()
+        self._mcu_id: bytes | None = None
+        self._awaiting_mcu_id = False
+        self.steps = StepwiseTracker()
+        """The stepwise track so far (position, heading, covariance, step counts)."""
 
     @classmethod
-    async def open_serial(cls, port: str, *, capture: CaptureTap | None = None) -> OpenShoeUnit:
+    async def open_serial(
+        cls, port: str, *, capture: CaptureTap | None = None, command_set: p.CommandSet | None = None
+    ) -> OpenShoeUnit:
         """Open ``port`` exclusively and return a unit on it (close with :meth:`close` or ``async with``).
 
         Raises:
@@ -110,7 +217,16 @@ class OpenShoeUnit:
 
         link = SerialLink(port)
         await link.open()
-        return cls(link, capture=capture)
+        return cls(link, capture=capture, command_set=command_set)
+
+    @property
+    def command_set(self) -> p.CommandSet | None:
+        """The firmware's command set, once probed (or given)."""
+        return None if self._commands is None else self._commands.command_set
+
+    @property
+    def _firmware_name(self) -> str:
+        return "unknown" if self.command_set is None else self.command_set.value
 
     @property
     def stats(self) -> LinkStats:
@@ -129,7 +245,65 @@ class OpenShoeUnit:
             unexpected_packets=self._unexpected,
             bytes_received=self._bytes_received,
             samples=self._samples,
+            acks_sent=self._acks_sent,
+            firmware="" if self.command_set is None else self.command_set.value,
         )
+
+    # --- starting and stopping ---------------------------------------------------------------------
+
+    async def start(
+        self, mode: Mode, *, timeout_s: float = START_TIMEOUT_S, probe_timeout_s: float = PROBE_TIMEOUT_S
+    ) -> None:
+        """Probe the firmware if needed, then start ``mode`` and wait for the unit's ACK.
+
+        Raises:
+            DeviceError: no answer, the link failed, or the unit's firmware (2014) lacks ``mode``.
+            ValueError: an invalid mode parameter (rate divider, IMU mask, state IDs).
+        """
+        self._set_mode(mode)
+        skip_first = False
+        if self._commands is None:
+            first = self._probe_command(mode)
+            probe_s = min(probe_timeout_s, timeout_s)
+            if await self._probe(first, probe_s):
+                skip_first = first.cmd_id != p.CMD_ALL_PROC_OFF  # the probe was the mode's first command
+            else:
+                old = p.Commands2014()
+                # Only now, with 2015 firmware ruled out, may a 2014 command that 2015 would misparse go out.
+                fallback = (
+                    old.stepwise_dead_reckoning() if isinstance(mode, StepwiseMode) else old.processing_off()
+                )
+                if not await self._probe(fallback, probe_s, ruled_out=p.CommandSet.V2015):
+                    raise DeviceError(
+                        f"no answer from {self.link.name} to the start command within {probe_s:.1f} s "
+                        "(tried the 2015 and 2014 command sets); is it an OpenShoe/MIMU unit, powered and "
+                        "paired?"
+                    )
+                skip_first = isinstance(mode, StepwiseMode)
+        commands = self._commands
+        assert commands is not None
+        if isinstance(commands, p.Commands2014):
+            if not isinstance(mode, StepwiseMode):
+                raise DeviceError(
+                    f"the unit on {self.link.name} runs 2014 (MIMU22BT) firmware: footnav supports only "
+                    "stepwise dead reckoning on it; update the firmware for IMU or INS output"
+                )
+            sequence = [commands.stepwise_dead_reckoning()]
+        else:
+            sequence = self._start_sequence(commands, mode)
+        if skip_first:
+            sequence = sequence[1:]
+        if not sequence:
+            return
+        for cmd in sequence[:-1]:
+            await self._send(cmd)
+        last = sequence[-1]
+        await self._send(last)
+        if not await self._wait_for_ack(last.cmd_id, timeout_s):
+            raise DeviceError(
+                f"no answer from {self.link.name} to the start command within {timeout_s:.1f} s; "
+                f"is it an OpenShoe/MIMU unit on the {self._firmware_name} firmware?"
+            )
 
     async def start_imu_stream(
         self,
@@ -138,11 +312,11 @@ class OpenShoeUnit:
         with_bias_estimation: bool = False,
         timeout_s: float = START_TIMEOUT_S,
     ) -> None:
-        """Send the normal-IMU command (0x40, or 0x41) and wait for its ACK.
+        """Start the calibrated-IMU stream (0x40, or 0x41); lossy. See :meth:`start`.
 
         Args:
             rate_divider_log2: output every 2**k samples, k = 0..6: 1000, 500, ... 15.625 Hz at the
-                1 kHz base rate (default 0: every sample). Lossy mode (no per-packet host ACK).
+                1 kHz base rate (default 0: every sample).
             with_bias_estimation: use 0x41 (on-board gyro-bias estimation; output starts after 128
                 samples and is delayed by the front-end buffer).
             timeout_s: how long to wait for ``A0 40 ..``.
@@ -151,65 +325,89 @@ class OpenShoeUnit:
             DeviceError: no ACK within ``timeout_s``, or the link failed.
             ValueError: ``rate_divider_log2`` outside 0..6.
         """
-        if with_bias_estimation:
-            cmd_id = protocol.CMD_NORMAL_IMU_WITH_BIAS_EST
-            frame = protocol.normal_imu_with_bias_est_command(rate_divider_log2)
-        else:
-            cmd_id = protocol.CMD_NORMAL_IMU
-            frame = protocol.normal_imu_command(rate_divider_log2)
-        await self._write(frame)
-        if not await self._wait_for_ack(cmd_id, timeout_s):
-            raise DeviceError(
-                f"no answer from {self.link.name} to the start command within {timeout_s:.1f} s; "
-                "is it an OpenShoe/MIMU unit on the 2015 firmware?"
-            )
+        p.imu_mode_byte(rate_divider_log2)  # validate before anything is sent
+        mode = NormalImuMode(rate_divider_log2, bias_estimation=with_bias_estimation)
+        await self.start(mode, timeout_s=timeout_s, probe_timeout_s=timeout_s)
 
-    async def imu_batches(self) -> AsyncIterator[ImuBatch]:
-        """Yield the samples of each read as one :class:`ImuBatch`, in order, duplicates dropped.
-
-        Ends when the link is closed; wrap in ``contextlib.aclosing`` if you may break out early.
+    async def enable_extensions(
+        self, *, tof: bool = True, baro: bool = True, timeout_s: float = START_TIMEOUT_S
+    ) -> None:
+        """Switch footnav's extension states (ToF 0xE1, barometer 0xE2) on or off (2015 firmware only).
 
         Raises:
-            DeviceError: the unit was disconnected.
+            DeviceError: firmware not probed yet (call :meth:`start` first) or 2014 firmware, or no ACK.
         """
-        self._iterating = True
+        commands = self._commands
+        if not isinstance(commands, p.Commands2015):
+            raise DeviceError(f"extension states need 2015 firmware; start a mode on {self.link.name} first")
+        for state, on in ((extensions.STATE_TOF, tof), (extensions.STATE_BARO, baro)):
+            cmd = commands.output_state(state, p.imu_mode_byte(0 if on else None, lossless=self._lossless))
+            await self._send(cmd)
+            if on:
+                self._extensions.add(state)
+            else:
+                self._extensions.discard(state)
+            if not await self._wait_for_ack(cmd.cmd_id, timeout_s):
+                raise DeviceError(f"{self.link.name} did not ACK the extension state 0x{state:02X}")
+
+    async def request_mcu_id(self, *, timeout_s: float = START_TIMEOUT_S) -> bytes:
+        """Ask for the MCU serial number (command 0x04) and return its 15 bytes.
+
+        Raises:
+            DeviceError: no reply within ``timeout_s`` or no firmware probed yet.
+        """
+        if self._commands is None:
+            await self._probe(p.Commands2015().processing_off(), min(PROBE_TIMEOUT_S, timeout_s))
+            if self._commands is None and not await self._probe(p.Commands2014().processing_off(), timeout_s):
+                raise DeviceError(f"no answer from {self.link.name} to the probe within {timeout_s:.1f} s")
+        commands = self._commands
+        assert commands is not None
+        self._mcu_id = None
+        self._awaiting_mcu_id = True
         try:
-            while self._pending:
-                host_ns, payloads, numbers = self._pending.pop(0)
-                batch = self._batch(host_ns, payloads, numbers)
-                if batch is not None:
-                    yield batch
-            while True:
-                host_ns, payloads, numbers = await self._read_frames()
-                if host_ns < 0:
-                    return
-                batch = self._batch(host_ns, payloads, numbers)
-                if batch is not None:
-                    yield batch
+            await self._send(commands.mcu_id())
+            async with asyncio.timeout(timeout_s):
+                while self._mcu_id is None:
+                    batches = await self._read_batches()
+                    if batches is None:
+                        break
+                    if batches:
+                        self._pending.append(batches)
+        except TimeoutError:
+            pass
         finally:
-            self._iterating = False
+            self._awaiting_mcu_id = False
+        if self._mcu_id is None:
+            raise DeviceError(f"{self.link.name} did not send its MCU id within {timeout_s:.1f} s")
+        return self._mcu_id
 
     async def stop(self, *, timeout_s: float = STOP_TIMEOUT_S) -> bool:
-        """Send processing off (0x32) then outputs off (0x22).
+        """Send processing off then outputs off (``32``/``22``, or ``27``/``21`` on 2014 firmware).
 
-        If no :meth:`imu_batches` loop is running, also wait up to ``timeout_s`` for the ACK of 0x22
-        (data still arriving meanwhile is discarded).
+        If no :meth:`batches` loop is running, also wait up to ``timeout_s`` for the ACK of outputs off
+        (data still arriving meanwhile is ACKed if lossless, and discarded).
 
         Returns:
-            True if the ACK of 0x22 was seen (always False while a batch loop is running).
+            True if the ACK of outputs off was seen (always False while a batch loop is running).
 
         Raises:
             DeviceError: the link failed while writing.
         """
-        await self._write(protocol.processing_off_command())
-        await self._write(protocol.outputs_off_command())
+        commands = self._commands
+        if commands is None:
+            return False  # never probed, so nothing was started (and no set is known to be safe)
+        off = commands.outputs_off()
+        await self._send(commands.processing_off())
+        await self._send(off)
         if self._iterating:
             return False
         try:
-            acked = await self._wait_for_ack(protocol.CMD_OUTPUT_ALL_OFF, timeout_s)
+            acked = await self._wait_for_ack(off.cmd_id, timeout_s)
         except DeviceError:
             return False
         self._pending.clear()
+        self._lossless = False
+        self._extensions.clear()
         return acked
 
     async def close(self) -> None:
@@ -224,70 +422,300 @@ class OpenShoeUnit:
     ) -> None:
         await self.close()
 
+    # --- streaming ---------------------------------------------------------------------------------
+
+    async def batches(self) -> AsyncGenerator[Batch, None]:
+        """Yield the decoded packets of each read as typed batches, in order, duplicates dropped.
+
+        Ends when the link is closed; wrap in ``contextlib.aclosing`` if you may break out early.
+
+        Raises:
+            DeviceError: the unit was disconnected.
+        """
+        self._iterating = True
+        try:
+            while self._pending:
+                for batch in self._pending.pop(0):
+                    yield batch
+            while True:
+                batches = await self._read_batches()
+                if batches is None:
+                    return
+                for batch in batches:
+                    yield batch
+        finally:
+            self._iterating = False
+
+    async def imu_batches(self) -> AsyncGenerator[ImuBatch, None]:
+        """Only the :class:`ImuBatch` es of :meth:`batches` (the calibrated-IMU stream)."""
+        async with contextlib.aclosing(self.batches()) as stream:
+            async for batch in stream:
+                if isinstance(batch, ImuBatch):
+                    yield batch
+
     # --- internals -------------------------------------------------------------------------------
+
+    def _set_mode(self, mode: Mode) -> None:
+        """Validate ``mode`` and set up decoding for it (before its first packet can arrive)."""
+        if isinstance(mode, NormalImuMode):
+            p.imu_mode_byte(mode.rate_divider_log2)
+        elif isinstance(mode, RawImuMode):
+            p.Commands2015().raw_imu(mode.imu_mask, mode.rate_divider_log2)  # validates
+            self._raw_layout = RawImuLayout(
+                raw_imu.mask_to_ids(mode.imu_mask),
+                temperature=mode.temperature,
+                magnetometer=mode.magnetometer,
+            )
+        elif isinstance(mode, InsMode):
+            p.imu_mode_byte(mode.rate_divider_log2)
+            self._ins_layout = InsLayout(mode.state_ids)
+        self._mode = mode
+        self._lossless = isinstance(mode, StepwiseMode) or bool(getattr(mode, "lossless", False))
+        if isinstance(mode, StepwiseMode):
+            self.steps = StepwiseTracker()
+
+    @staticmethod
+    def _probe_command(mode: Mode) -> p.OutgoingCommand:
+        """The 2015 command to probe with: the mode's start if 2014 firmware drops it unparsed."""
+        c = p.Commands2015()
+        if isinstance(mode, StepwiseMode):
+            cmd = c.stepwise_dead_reckoning()
+        elif isinstance(mode, NormalImuMode):
+            cmd = c.normal_imu(
+                mode.rate_divider_log2, bias_estimation=mode.bias_estimation, lossless=mode.lossless
+            )
+        elif isinstance(mode, InsMode):
+            cmd = c.reset_ins()
+        else:
+            cmd = c.processing_off()
+        return cmd if cmd.harmless_on_other_set else c.processing_off()
+
+    @staticmethod
+    def _start_sequence(c: p.Commands2015, mode: Mode) -> list[p.OutgoingCommand]:
+        if isinstance(mode, StepwiseMode):
+            return [c.stepwise_dead_reckoning()]
+        if isinstance(mode, NormalImuMode):
+            return [
+                c.normal_imu(
+                    mode.rate_divider_log2, bias_estimation=mode.bias_estimation, lossless=mode.lossless
+                )
+            ]
+        if isinstance(mode, RawImuMode):
+            return [
+                c.run_proc(p.PROC_READ_INERTIAL, 0),
+                c.raw_imu(
+                    mode.imu_mask,
+                    mode.rate_divider_log2,
+                    lossless=mode.lossless,
+                    temperature=mode.temperature,
+                    magnetometer=mode.magnetometer,
+                ),
+            ]
+        ids = InsLayout(mode.state_ids).state_ids
+        rate = p.imu_mode_byte(mode.rate_divider_log2, lossless=mode.lossless)
+        output = c.output_state(ids[0], rate) if len(ids) == 1 else c.output_states(ids, rate)
+        return [c.reset_ins(), output]
+
+    async def _probe(
+        self, cmd: p.OutgoingCommand, timeout_s: float, *, ruled_out: p.CommandSet | None = None
+    ) -> bool:
+        """Send a probe command; on its ACK, adopt its set.
+
+        The command must be one the other set's firmware drops unparsed, unless that other set was
+        ``ruled_out`` by an earlier unanswered probe.
+        """
+        other_ruled_out = ruled_out is not None and ruled_out is not cmd.command_set
+        if not (cmd.harmless_on_other_set or other_ruled_out):
+            raise ProtocolError(f"0x{cmd.cmd_id:02X} is not safe to send before the firmware is known")
+        await self._write(cmd.frame)
+        if await self._wait_for_ack(cmd.cmd_id, timeout_s):
+            self._commands = p.commands_for(cmd.command_set)
+            log.info("%s: firmware command set %s", self.link.name, cmd.command_set.value)
+            await self._ack_data()
+            return True
+        return False
+
+    async def _ack_data(self) -> None:
+        """ACK the data packets received so far (held back while the command set is still unknown)."""
+        if self._commands is None or not self._unacked:
+            return
+        numbers, self._unacked = self._unacked, []
+        self._acks_sent += len(numbers)
+        await self._write(b"".join(self._commands.ack(n).frame for n in numbers))
+
+    async def _send(self, cmd: p.OutgoingCommand) -> None:
+        """Write a command of the detected set.
+
+        Raises:
+            ProtocolError: ``cmd`` belongs to the other command set (it would be misparsed).
+        """
+        if cmd.command_set is not self.command_set:
+            raise ProtocolError(
+                f"refusing to send {cmd.name} (0x{cmd.cmd_id:02X}) of the {cmd.command_set.value} command "
+                f"set to {self.link.name}, which runs {self._firmware_name} firmware"
+            )
+        await self._write(cmd.frame)
 
     async def _write(self, data: bytes) -> None:
         if self._capture is not None:
             self._capture("tx", time.monotonic_ns(), data)
         await self.link.write(data)
 
-    async def _read_frames(self) -> tuple[int, list[bytes], list[int]]:
-        """Read once; return (host_ns, normal-IMU payloads, their numbers); host_ns = -1 at end of stream."""
+    async def _read_batches(self) -> list[Batch] | None:
+        """Read once; ACK lossless packets; return the read's batches (None at end of stream)."""
         data = await self.link.read()
         host_ns = time.monotonic_ns()
         if not data:
-            return -1, [], []
+            return None
         self._bytes_received += len(data)
         if self._capture is not None:
             self._capture("rx", host_ns, data)
-        payloads: list[bytes] = []
         numbers: list[int] = []
+        payloads: list[bytes] = []
         for frame in self._framer.feed(data):
             if type(frame) is DataPacket:
-                if len(frame.payload) == PAYLOAD_LEN:
-                    payloads.append(frame.payload)
-                    numbers.append(frame.number)
-                else:  # pragma: no cover - the framer only accepts PAYLOAD_LEN
-                    self._unexpected += 1
+                numbers.append(frame.number)
+                payloads.append(frame.payload)
             elif type(frame) is DeviceAck:
                 self._acks.append(frame.cmd_id)
                 del self._acks[:-_MAX_REMEMBERED_ACKS]
-        return host_ns, payloads, numbers
+        if not numbers:
+            return []
+        if self._lossless:
+            self._unacked.extend(numbers)
+            await self._ack_data()
+        counters, dup = self._counters.update(np.asarray(numbers, dtype=np.int64))
+        decoded = _Decoded(host_ns)
+        for i, payload in enumerate(payloads):
+            if dup[i]:
+                continue
+            self._route(decoded, int(counters[i]), numbers[i], payload)
+        return self._build(decoded)
+
+    def _route(self, out: _Decoded, counter: int, number: int, payload: bytes) -> None:
+        n = len(payload)
+        kind = extensions.extension_kind(payload) if n in (9, 11) else None
+        if kind is not None and kind in self._extensions:
+            (out.tof if kind == extensions.STATE_TOF else out.baro).append((counter, payload))
+            return
+        mode = self._mode
+        if isinstance(mode, StepwiseMode) and n == stepwise.PAYLOAD_LEN:
+            out.steps.append((number, payload))
+        elif isinstance(mode, NormalImuMode) and n == PAYLOAD_LEN:
+            out.normal.append((counter, payload))
+        elif (
+            isinstance(mode, RawImuMode)
+            and self._raw_layout is not None
+            and n == self._raw_layout.payload_len
+        ):
+            out.raw.append((counter, payload))
+        elif isinstance(mode, InsMode) and self._ins_layout is not None and n == self._ins_layout.payload_len:
+            out.ins.append((counter, payload))
+        elif self._awaiting_mcu_id and n == p.MCU_ID_LEN:
+            self._mcu_id = payload
+        else:
+            self._unexpected += 1
+            if n not in self._unknown_lengths_logged:
+                self._unknown_lengths_logged.add(n)
+                log.warning(
+                    "%s: ignoring data packets with a %d-byte payload (not expected in %s mode); "
+                    "first: %s; further ones are only counted",
+                    self.link.name,
+                    n,
+                    type(mode).__name__ if mode else "no",
+                    payload[:16].hex(" "),
+                )
+
+    def _build(self, d: _Decoded) -> list[Batch]:
+        """Decode each kind with one ``np.frombuffer``; one shared clock for every time stamp."""
+        ticks: list[int] = []
+        for group, offset in ((d.normal, 0), (d.raw, 0), (d.tof, 1), (d.baro, 1)):
+            ticks.extend(int.from_bytes(pl[offset : offset + 4], "big") for _, pl in group)
+        if self._ins_layout is not None and self._ins_layout.has(p.STATE_IMU_TS):
+            ticks.extend(int.from_bytes(pl[:4], "big") for _, pl in d.ins)
+        t_all = self._clock.update(np.asarray(ticks, dtype=np.int64))
+        out: list[Batch] = []
+        k = 0
+
+        def take(m: int) -> np.ndarray:
+            nonlocal k
+            k += m
+            return t_all[k - m : k]
+
+        def counter_of(group: list[tuple[int, bytes]]) -> np.ndarray:
+            return np.asarray([c for c, _ in group], dtype=np.int64)
+
+        def host(m: int) -> np.ndarray:
+            return np.full(m, d.host_ns, dtype=np.int64)
+
+        if d.normal:
+            arr = decode_payloads(b"".join(pl for _, pl in d.normal))
+            m = len(d.normal)
+            out.append(ImuBatch(take(m), arr.acc_b_mps2, arr.gyr_b_radps, counter_of(d.normal), host(m)))
+        if d.raw:
+            assert self._raw_layout is not None
+            rarr = raw_imu.decode_payloads(b"".join(pl for _, pl in d.raw), self._raw_layout)
+            m = len(d.raw)
+            out.append(
+                RawImuBatch(
+                    self._raw_layout.imu_ids,
+                    take(m),
+                    rarr.acc_b_mps2,
+                    rarr.gyr_b_radps,
+                    rarr.temperature_raw,
+                    rarr.mag_raw,
+                    counter_of(d.raw),
+                    host(m),
+                )
+            )
+        t_tof = take(len(d.tof)) if d.tof else None
+        t_baro = take(len(d.baro)) if d.baro else None
+        if d.ins:
+            assert self._ins_layout is not None
+            iarr = ins_states.decode_payloads(b"".join(pl for _, pl in d.ins), self._ins_layout)
+            m = len(d.ins)
+            t_ins = take(m) if iarr.ticks is not None else np.full(m, np.nan)
+            out.append(
+                InsStateBatch(
+                    t_ins,
+                    iarr.pos_n_m,
+                    iarr.vel_n_mps,
+                    iarr.quat_nb_wxyz,
+                    iarr.cov_9x9,
+                    iarr.interrupt_counter,
+                    counter_of(d.ins),
+                    host(m),
+                )
+            )
+        if d.steps:
+            step_batch = self.steps.update(
+                [n for n, _ in d.steps], b"".join(pl for _, pl in d.steps), d.host_ns
+            )
+            if step_batch is not None:
+                out.append(step_batch)
+        if d.tof and t_tof is not None:
+            tarr = extensions.decode_tof(b"".join(pl for _, pl in d.tof))
+            out.append(
+                TofBatch(t_tof, tarr.sensor, tarr.range_m, tarr.status, counter_of(d.tof), host(len(d.tof)))
+            )
+        if d.baro and t_baro is not None:
+            barr = extensions.decode_baro(b"".join(pl for _, pl in d.baro))
+            m = len(d.baro)
+            out.append(BaroBatch(t_baro, barr.pressure_pa, barr.temperature_c, counter_of(d.baro), host(m)))
+        self._samples += sum(len(b) for b in out)
+        return out
 
     async def _wait_for_ack(self, cmd_id: int, timeout_s: float) -> bool:
-        """Read until the ACK of ``cmd_id``; keep data packets for :meth:`imu_batches`."""
+        """Read until the ACK of ``cmd_id``; keep decoded batches for :meth:`batches`."""
         try:
             async with asyncio.timeout(timeout_s):
                 while cmd_id not in self._acks:
-                    host_ns, payloads, numbers = await self._read_frames()
-                    if host_ns < 0:
+                    batches = await self._read_batches()
+                    if batches is None:
                         return False
-                    if payloads:
-                        self._pending.append((host_ns, payloads, numbers))
+                    if batches:
+                        self._pending.append(batches)
         except TimeoutError:
             return False
         self._acks.clear()
         return True
-
-    def _batch(self, host_ns: int, payloads: list[bytes], numbers: list[int]) -> ImuBatch | None:
-        if not payloads:
-            return None
-        counters, dup = self._counters.update(np.asarray(numbers, dtype=np.int64))
-        arrays = decode_payloads(b"".join(payloads))
-        ticks = arrays.ticks
-        acc = arrays.acc_b_mps2
-        gyr = arrays.gyr_b_radps
-        if dup.any():
-            keep = ~dup
-            counters, ticks, acc, gyr = counters[keep], ticks[keep], acc[keep], gyr[keep]
-            if counters.size == 0:
-                return None
-        t_s = self._ticks.update(ticks)
-        self._samples += int(counters.size)
-        return ImuBatch(
-            t_s=t_s,
-            acc_b_mps2=acc,
-            gyr_b_radps=gyr,
-            counter=counters,
-            host_ns=np.full(counters.size, host_ns, dtype=np.int64),
-        )

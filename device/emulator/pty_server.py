@@ -1,26 +1,26 @@
-"""A virtual OpenShoe unit (2015 firmware, normal-IMU output) served on a pseudo-terminal.
+"""A virtual OpenShoe unit served on a pseudo-terminal: every output mode, lossless resends, link budget.
 
 The host opens :attr:`PtyShoeServer.port` with real pyserial, as it would ``/dev/ttyACM0``. A background
 thread does blocking I/O on the pty master: ``select()`` for host commands and for room to write,
-``os.write`` for data. Like the firmware it ACKs valid commands (``A0 id chk``), drops unknown and
-bad-checksum bytes, streams 34-byte 0x40 packets only after the 0x40/0x41 start command (respecting the
-rate divider) and stops on 0x32/0x22 (0x22 also empties the TX queue). Package numbers start at 1 and
-are not reset by commands. Pty pitfalls handled here: transports-and-emulation.md section 1.2 (raw slave
-before the host opens it; pyserial flushes input on open; the slave fd is kept open; closing the master
-is an unplug). Firmware behaviour: protocol-openshoe.md sections 3.1, 4.1, 5.3.
+``os.write`` for data. What the unit says and when is decided by the sans-I/O
+:class:`~device.emulator.firmware.ShoeFirmware` (every mode of protocol-openshoe.md: normal and raw
+IMU, INS states, stepwise dead reckoning with lossless resends, footnav's ToF/barometer extension
+states, the MCU id, 2015 or 2014 command set). This module adds the transport: pacing, an optional
+link budget (bytes/s, e.g. 11 500 for a 115200-baud Bluetooth UART), and fault injection (split
+writes, garbage). Pty pitfalls handled here: transports-and-emulation.md section 1.2 (raw slave before
+the host opens it; pyserial flushes input on open; the slave fd is kept open; closing the master is an
+unplug).
 """
 
 from __future__ import annotations
 
 import contextlib
-import math
 import os
 import select
 import termios
 import threading
 import time
 import tty
-from collections import deque
 from types import TracebackType
 from typing import Final, Self
 
@@ -28,28 +28,30 @@ import numpy as np
 from numpy.typing import NDArray
 
 from device import protocol
-from device.imu_packets import PACKET_LEN, encode_packets, seconds_to_ticks
+from device.emulator.firmware import DEFAULT_TICK0, RESEND_INTERVAL_S, ShoeFirmware
+from device.emulator.scripts import BaroScript, InsTruth, StepScript, TofScript
 
-DEFAULT_TICK0: Final = (1 << 32) - int(20 * 64e6)
-"""First sample's tick: the 32-bit 64 MHz counter wraps 20 s into the stream."""
+__all__ = ["DEFAULT_TICK0", "PtyShoeServer"]
+
 DEFAULT_CHUNK_INTERVAL_S: Final = 0.001
 """At finite speed, data leaves in chunks at most this often (USB full-speed frames are 1 ms)."""
-MAX_CHUNK_PACKETS: Final = 256
-"""Packets encoded per chunk when streaming as fast as the reader takes them."""
+BT_UART_BUDGET_BPS: Final = 11_500.0
+"""What a 115200-baud 8N1 UART to a Bluetooth module carries (protocol-openshoe.md section 8)."""
 _READ_SIZE: Final = 4096
+_BUDGET_BURST_S: Final = 0.01
+"""The link budget's bucket holds this many seconds of bytes (a UART FIFO's worth)."""
 
 
 class PtyShoeServer:
-    """Stream IMU sample arrays as a unit on a pty.
+    """Serve an emulated unit on a pty.
 
     Args:
-        t_s: (n,) sample times, s, increasing (the unit's 1 kHz base rate; divider applies on top).
-        acc_b_mps2: (n, 3) specific force, body frame, m/s².
+        t_s: (n,) sample times, s, increasing (the unit's 1 kHz base rate; dividers apply on top).
+        acc_b_mps2: (n, 3) specific force, body frame, m/s² (normal-IMU output).
         gyr_b_radps: (n, 3) angular rate, body frame, rad/s.
         speed: 1.0 = real time, paced by absolute deadlines, chunks every ≥1 ms; ``math.inf`` = as
-            fast as the reader takes them.
-        chunk_interval_s: at finite speed, the shortest time between chunks of due packets (1–10 ms
-            is USB-like).
+            fast as the reader takes them (and, in lossless mode, as fast as it ACKs).
+        chunk_interval_s: at finite speed, the shortest time between chunks of due packets.
         tick0: 64 MHz tick of ``t_s[0]``; the default makes the uint32 counter wrap after 20 s.
         first_packet_number: package number of the first packet (wraps at 2**16).
         split_writes_max: if set, cut the byte stream into writes of random size 1..k, regardless of
@@ -58,6 +60,14 @@ class PtyShoeServer:
             with a fake ``AA`` header) after every this many packets.
         seed: seed for the fault generators.
         record: keep every byte written, for :attr:`sent_bytes`.
+        imu_acc_b_mps2, imu_gyr_b_radps: (n, k, 3) per-IMU signals for raw output 0x28 (k = 1..4 or more).
+        ins: INS truth at ``t_s`` for INS-state output.
+        steps: stepwise-dead-reckoning packets (see :func:`device.emulator.scripts.steps_from_truth`).
+        tof, baro: extension-state readings.
+        command_set: firmware generation (the 2014 set answers only the old IDs).
+        resend_interval_s: lossless resend period (128 ms).
+        mcu_id: 15 bytes answered to command 0x04.
+        link_budget_bps: if set, never write faster than this many bytes per second.
     """
 
     def __init__(
@@ -75,21 +85,42 @@ class PtyShoeServer:
         garbage_max_len: int = 16,
         seed: int = 0,
         record: bool = True,
+        imu_acc_b_mps2: NDArray[np.float64] | None = None,
+        imu_gyr_b_radps: NDArray[np.float64] | None = None,
+        ins: InsTruth | None = None,
+        steps: StepScript | None = None,
+        tof: TofScript | None = None,
+        baro: BaroScript | None = None,
+        command_set: protocol.CommandSet = protocol.CommandSet.V2015,
+        resend_interval_s: float = RESEND_INTERVAL_S,
+        mcu_id: bytes | None = None,
+        link_budget_bps: float | None = None,
     ) -> None:
-        self._t_s = np.asarray(t_s, dtype=np.float64)
-        self._acc = np.asarray(acc_b_mps2, dtype=np.float64)
-        self._gyr = np.asarray(gyr_b_radps, dtype=np.float64)
-        n = self._t_s.shape[0]
-        if self._acc.shape != (n, 3) or self._gyr.shape != (n, 3):
-            shapes = f"{self._t_s.shape}, {self._acc.shape}, {self._gyr.shape}"
-            raise ValueError(f"need t_s (n,), acc (n, 3), gyr (n, 3); got {shapes}")
-        if not speed > 0:
-            raise ValueError(f"speed must be > 0 (math.inf for as fast as possible), got {speed}")
         if split_writes_max is not None and split_writes_max < 1:
             raise ValueError("split_writes_max must be >= 1")
         if garbage_every is not None and garbage_every < 1:
             raise ValueError("garbage_every must be >= 1")
-        self._ticks = seconds_to_ticks(self._t_s, tick0) if n else np.empty(0, np.uint32)
+        if link_budget_bps is not None and not link_budget_bps > 0:
+            raise ValueError(f"link_budget_bps must be > 0, got {link_budget_bps}")
+        extra = {} if mcu_id is None else {"mcu_id": mcu_id}
+        self.firmware = ShoeFirmware(
+            t_s,
+            acc_b_mps2,
+            gyr_b_radps,
+            imu_acc_b_mps2=imu_acc_b_mps2,
+            imu_gyr_b_radps=imu_gyr_b_radps,
+            ins=ins,
+            steps=steps,
+            tof=tof,
+            baro=baro,
+            command_set=command_set,
+            speed=speed,
+            tick0=tick0,
+            first_packet_number=first_packet_number,
+            resend_interval_s=resend_interval_s,
+            **extra,
+        )
+        """The emulated firmware (commands received, resends, ...); touch it only while stopped."""
         self.speed = speed
         self._chunk_interval_s = chunk_interval_s
         self._split_max = split_writes_max
@@ -97,6 +128,9 @@ class PtyShoeServer:
         self._garbage_max_len = max(1, garbage_max_len)
         self._rng = np.random.default_rng(seed)
         self._record = record
+        self._budget_bps = link_budget_bps
+        self._tokens = 0.0 if link_budget_bps is None else link_budget_bps * _BUDGET_BURST_S
+        self._tokens_at = time.monotonic()
 
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave, termios.TCSANOW)  # before the host opens it: no echo, no line editing
@@ -107,15 +141,7 @@ class PtyShoeServer:
         os.set_blocking(self._wake_r, False)
         os.set_blocking(self._wake_w, False)
 
-        self._parser = protocol.CommandParser()
-        self._next_number = first_packet_number
-        self._next_index = 0
-        self._divider = 1
-        self._streaming = False
-        self._wall0 = 0.0
-        self._t0 = 0.0
         self._packets_since_garbage = 0
-        self._out: deque[tuple[bytes, int]] = deque()
         self._inflight: memoryview | None = None
         self._inflight_packets = 0
         self._sent = bytearray()
@@ -125,15 +151,20 @@ class PtyShoeServer:
         self._thread = threading.Thread(target=self._run, name=f"pty-shoe {self.port}", daemon=True)
 
         self.finished = threading.Event()
-        """Set once the last sample has been streamed (or dropped by 0x22) and nothing is left to write.
+        """Set once every started output has sent its last item and nothing is left to write.
 
         It stays set; the server keeps answering commands until :meth:`stop`."""
         self.packets_sent = 0
-        """Data packets written to the pty so far."""
-        self.commands: list[protocol.Command] = []
-        """Valid host commands received, in order."""
+        """Data packets written to the pty so far (lossless resends included)."""
+        self.bytes_written = 0
+        """Bytes written to the pty so far."""
         self.error: BaseException | None = None
         """What stopped the server thread, if it failed."""
+
+    @property
+    def commands(self) -> list[protocol.Command]:
+        """Valid host commands received, in order."""
+        return self.firmware.commands
 
     # --- control (any thread) ---------------------------------------------------------------------
 
@@ -183,60 +214,48 @@ class PtyShoeServer:
 
     def _serve(self) -> None:
         master, wake = self._master, self._wake_r
-        n = self._t_s.shape[0]
+        fw = self.firmware
         while not self._quit:
             now = time.monotonic()
-            if self._streaming and self._next_index < n:
-                self._produce(now)
-            pending = self._inflight is not None or bool(self._out)
-            if not pending and self._next_index >= n and not self.finished.is_set():
+            fw.produce(now)
+            pending = self._inflight is not None or bool(fw.out)
+            if not pending and fw.exhausted and not self.finished.is_set():
                 self.finished.set()
             timeout: float | None = None
-            if self._streaming and self._next_index < n and (not pending or not math.isinf(self.speed)):
-                due = self._due_s(self._next_index)
-                timeout = max(due - time.monotonic(), self._chunk_interval_s)
-            readable, writable, _ = select.select([master, wake], [master] if pending else [], [], timeout)
+            wake_at = fw.next_wakeup(now)
+            if wake_at is not None:
+                timeout = max(wake_at - time.monotonic(), self._chunk_interval_s)
+            want_write = pending
+            if pending and self._budget_bps is not None and self._refill(now) < 1.0:
+                want_write = False  # out of budget: sleep until a byte's worth has accrued
+                wait = (1.0 - self._tokens) / self._budget_bps
+                timeout = wait if timeout is None else min(timeout, wait)
+            readable, writable, _ = select.select([master, wake], [master] if want_write else [], [], timeout)
             if wake in readable:
                 with contextlib.suppress(BlockingIOError):
                     os.read(wake, 64)
                 continue
             if master in readable:
-                self._on_host_bytes(os.read(master, _READ_SIZE))
+                fw.receive(os.read(master, _READ_SIZE), time.monotonic())
             if master in writable:
                 self._write_some()
 
-    def _due_s(self, index: int) -> float:
-        if math.isinf(self.speed):
-            return time.monotonic()
-        return self._wall0 + (float(self._t_s[index]) - self._t0) / self.speed
+    def _refill(self, now: float) -> float:
+        assert self._budget_bps is not None
+        self._tokens = min(
+            self._budget_bps * _BUDGET_BURST_S, self._tokens + (now - self._tokens_at) * self._budget_bps
+        )
+        self._tokens_at = now
+        return self._tokens
 
-    def _produce(self, now: float) -> None:
-        """Queue the samples that are due (all up to a chunk at infinite speed)."""
-        start, step, n = self._next_index, self._divider, self._t_s.shape[0]
-        if math.isinf(self.speed):
-            if len(self._out) >= 2:
-                return
-            stop = min(n, start + MAX_CHUNK_PACKETS * step)
-        else:
-            t_limit = self._t0 + (now - self._wall0) * self.speed
-            stop = int(np.searchsorted(self._t_s, t_limit, side="right"))
-        idx = np.arange(start, stop, step)
-        if idx.size == 0:
-            return
-        self._next_index = int(idx[-1]) + step
-        numbers = np.arange(self._next_number, self._next_number + idx.size)
-        self._next_number = (self._next_number + idx.size) & 0xFFFF
-        data = encode_packets(numbers, self._ticks[idx], self._acc[idx], self._gyr[idx])
-        if self._garbage_every is not None:
-            data = self._with_garbage(data)
-        self._out.append((data, int(idx.size)))
-
-    def _with_garbage(self, data: bytes) -> bytes:
+    def _with_garbage(self, data: bytes, count: int) -> bytes:
         every = self._garbage_every
-        assert every is not None
+        if every is None or count == 0 or len(data) % count:
+            return data
+        size = len(data) // count
         parts: list[bytes] = []
-        for k in range(0, len(data), PACKET_LEN):
-            parts.append(data[k : k + PACKET_LEN])
+        for k in range(0, len(data), size):
+            parts.append(data[k : k + size])
             self._packets_since_garbage += 1
             if self._packets_since_garbage >= every:
                 self._packets_since_garbage = 0
@@ -252,21 +271,29 @@ class PtyShoeServer:
         return junk
 
     def _write_some(self) -> None:
-        """Write what the pty takes now; with split writes, many small writes."""
+        """Write what the pty (and the link budget) takes now; with split writes, many small writes."""
+        fw = self.firmware
         budget = 64 if self._split_max is not None else 1
         while budget > 0:
             budget -= 1
             if self._inflight is None:
-                if not self._out:
+                if not fw.out:
                     return
-                data, count = self._out.popleft()
-                self._inflight, self._inflight_packets = memoryview(data), count
+                data, count = fw.out.popleft()
+                self._inflight, self._inflight_packets = memoryview(self._with_garbage(data, count)), count
             view = self._inflight
             size = len(view) if self._split_max is None else int(self._rng.integers(1, self._split_max + 1))
+            if self._budget_bps is not None:
+                size = min(size, int(self._refill(time.monotonic())))
+                if size <= 0:
+                    return
             try:
                 written = os.write(self._master, view[:size])
             except BlockingIOError:
                 return
+            if self._budget_bps is not None:
+                self._tokens -= written
+            self.bytes_written += written
             if self._record:
                 with self._lock:
                     self._sent += view[:written]
@@ -275,38 +302,6 @@ class PtyShoeServer:
                 self.packets_sent += self._inflight_packets
             else:
                 self._inflight = view[written:]
-
-    def _on_host_bytes(self, data: bytes) -> None:
-        for cmd in self._parser.feed(data, time.monotonic()):
-            self.commands.append(cmd)
-            self._execute(cmd)
-
-    def _execute(self, cmd: protocol.Command) -> None:
-        cid = cmd.cmd_id
-        if cid == protocol.CMD_ACK:
-            return  # host ACKs are never acknowledged
-        if cid in (protocol.CMD_NORMAL_IMU, protocol.CMD_NORMAL_IMU_WITH_BIAS_EST):
-            log2 = protocol.rate_divider_log2_from_mode(cmd.payload[0])
-            self._ack(cid)
-            if log2 is None:
-                self._streaming = False
-            else:
-                self._divider = 1 << log2
-                if not self._streaming and self._next_index < self._t_s.shape[0]:
-                    self._wall0 = time.monotonic()
-                    self._t0 = float(self._t_s[self._next_index])
-                self._streaming = True
-            return
-        if cid == protocol.CMD_OUTPUT_ALL_OFF:
-            # Empties the TX queue of data; ACKs still queued and bytes already in flight go out.
-            self._out = deque(item for item in self._out if item[1] == 0)
-            self._streaming = False
-        elif cid == protocol.CMD_ALL_PROC_OFF:
-            self._streaming = False
-        self._ack(cid)
-
-    def _ack(self, cmd_id: int) -> None:
-        self._out.append((protocol.device_ack(cmd_id), 0))
 
     def _close_fds(self) -> None:
         with self._lock:
