@@ -20,8 +20,14 @@ passes the zero-velocity detector may still rotate (heel and toe roll, running),
 the gyro bias, so ZARU is applied only when its normalised innovation passes a χ² gate. For the same
 reason the ZUPT noise admits the velocity of a foot rolling about a contact point at most r from
 the IMU: σ_v² = σ_zupt² + (r |ω|)², since |v_imu| = |ω × r| ≤ r |ω| for a rigid foot.
-The covariance propagation multiplies only the non-identity blocks of F (about 1.5k multiply-adds
-per sample instead of 2 × 15³).
+The covariance propagation multiplies only the non-identity blocks of F and writes one triangle
+(about 800 multiply-adds per sample instead of 2 × 15³); the updates observe three states each, so
+their Joseph form is rank-3 work on one triangle. The per-sample loop allocates nothing (scratch
+arrays are made once per batch, quaternions are handled as scalars), uses numpy's error model (no
+Python-style division checks) and lets LLVM contract multiply-adds (``fastmath={"contract"}``: FMA
+only, no reassociation and no assumption about NaN or inf, so bad samples are still caught by
+``math.isfinite``). ``benchmarks.numpy_filter`` is the same filter with full matrices, the reference
+``tests/test_filter_reference.py`` checks this one against.
 """
 
 from __future__ import annotations
@@ -32,7 +38,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pipeline.quaternion import quat_from_rotvec, quat_mul, quat_to_mat
+from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s, quat_to_mat_into
 
 F64 = NDArray[np.float64]
 
@@ -60,168 +66,168 @@ CNT_BAD_DT, CNT_GAP, CNT_BAD_SAMPLE, CNT_UPDATES, CNT_ZARU, CNT_ZARU_REJECTED = 
 N_CNT = 6
 
 
-@njit(cache=True)
-def _skew_times_block_rows(P: F64, dst: int, src: int, vec: F64, scale: float, out: F64) -> None:
-    """out[dst:dst+3, :] += scale · [vec]× · P[src:src+3, :]."""  # pragma: no cover
-    n = P.shape[1]
-    for j in range(n):
-        a0, a1, a2 = P[src, j], P[src + 1, j], P[src + 2, j]
-        out[dst, j] += scale * (-vec[2] * a1 + vec[1] * a2)
-        out[dst + 1, j] += scale * (vec[2] * a0 - vec[0] * a2)
-        out[dst + 2, j] += scale * (-vec[1] * a0 + vec[0] * a1)
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _propagate_cov(P: F64, M: F64, R: F64, f_n: F64, dt: float, q_diag: F64) -> None:
+    """P ← F P Fᵀ + Q in place, F = I + A dt with the blocks of the module docstring.
 
-
-@njit(cache=True)
-def _mat_times_block_rows(P: F64, dst: int, src: int, M: F64, scale: float, out: F64) -> None:
-    """out[dst:dst+3, :] += scale · M · P[src:src+3, :] for a (3, 3) M."""  # pragma: no cover
-    n = P.shape[1]
-    for j in range(n):
-        a0, a1, a2 = P[src, j], P[src + 1, j], P[src + 2, j]
-        for r in range(3):
-            out[dst + r, j] += scale * (M[r, 0] * a0 + M[r, 1] * a1 + M[r, 2] * a2)
-
-
-@njit(cache=True)
-def _propagate_cov(P: F64, R: F64, f_n: F64, dt: float, q_diag: F64) -> None:
-    """P ← F P Fᵀ + Q in place, F = I + A dt with the blocks of the module docstring."""  # pragma: no cover
-    # M = F P  (row operations)
-    M = P.copy()
+    Only the rows and columns of p, v and θ change, so M = F P is formed for those nine rows
+    (``M`` is (9, 15) scratch), then P = M Fᵀ applies the same row operation to each of those
+    rows of M and is mirrored: about 800 multiply-adds and no allocation.
+    """  # pragma: no cover
+    f0, f1, f2 = f_n[0], f_n[1], f_n[2]
+    s = -dt
+    # M = F P for the rows of p, v, θ (row operations on P)
     for j in range(N_STATE):
+        a0, a1, a2 = P[TH0, j], P[TH0 + 1, j], P[TH0 + 2, j]
+        b0, b1, b2 = P[BA0, j], P[BA0 + 1, j], P[BA0 + 2, j]
+        c0, c1, c2 = P[BG0, j], P[BG0 + 1, j], P[BG0 + 2, j]
         for r in range(3):
-            M[P0 + r, j] += dt * P[V0 + r, j]
-    _skew_times_block_rows(P, V0, TH0, f_n, -dt, M)
-    _mat_times_block_rows(P, V0, BA0, R, -dt, M)
-    _mat_times_block_rows(P, TH0, BG0, R, -dt, M)
-    # P = M Fᵀ = (F Mᵀ)ᵀ: apply the same row operations to Mᵀ, then transpose back
-    Mt = M.T.copy()
-    out = Mt.copy()
-    for j in range(N_STATE):
+            M[P0 + r, j] = P[P0 + r, j] + dt * P[V0 + r, j]
+        M[V0, j] = P[V0, j] + s * (-f2 * a1 + f1 * a2) + s * (R[0, 0] * b0 + R[0, 1] * b1 + R[0, 2] * b2)
+        M[V0 + 1, j] = P[V0 + 1, j] + s * (f2 * a0 - f0 * a2) + s * (R[1, 0] * b0 + R[1, 1] * b1 + R[1, 2] * b2)
+        M[V0 + 2, j] = P[V0 + 2, j] + s * (-f1 * a0 + f0 * a1) + s * (R[2, 0] * b0 + R[2, 1] * b1 + R[2, 2] * b2)
         for r in range(3):
-            out[P0 + r, j] += dt * Mt[V0 + r, j]
-    _skew_times_block_rows(Mt, V0, TH0, f_n, -dt, out)
-    _mat_times_block_rows(Mt, V0, BA0, R, -dt, out)
-    _mat_times_block_rows(Mt, TH0, BG0, R, -dt, out)
+            M[TH0 + r, j] = P[TH0 + r, j] + s * (R[r, 0] * c0 + R[r, 1] * c1 + R[r, 2] * c2)
+    # P' = M Fᵀ: row i of P' is F applied to row i of M. Rows 0-8 are written with their mirror
+    # images; the bias-bias block is unchanged.
+    for i in range(9):
+        a0, a1, a2 = M[i, TH0], M[i, TH0 + 1], M[i, TH0 + 2]
+        b0, b1, b2 = M[i, BA0], M[i, BA0 + 1], M[i, BA0 + 2]
+        c0, c1, c2 = M[i, BG0], M[i, BG0 + 1], M[i, BG0 + 2]
+        for r in range(3):
+            P[i, P0 + r] = M[i, P0 + r] + dt * M[i, V0 + r]
+        P[i, V0] = M[i, V0] + s * (-f2 * a1 + f1 * a2) + s * (R[0, 0] * b0 + R[0, 1] * b1 + R[0, 2] * b2)
+        P[i, V0 + 1] = M[i, V0 + 1] + s * (f2 * a0 - f0 * a2) + s * (R[1, 0] * b0 + R[1, 1] * b1 + R[1, 2] * b2)
+        P[i, V0 + 2] = M[i, V0 + 2] + s * (-f1 * a0 + f0 * a1) + s * (R[2, 0] * b0 + R[2, 1] * b1 + R[2, 2] * b2)
+        for r in range(3):
+            P[i, TH0 + r] = M[i, TH0 + r] + s * (R[r, 0] * c0 + R[r, 1] * c1 + R[r, 2] * c2)
+        for j in range(9, N_STATE):
+            P[i, j] = M[i, j]
+    # the lower triangle from the upper one: P' is symmetric by construction
     for i in range(N_STATE):
-        for j in range(N_STATE):
-            P[i, j] = 0.5 * (out[i, j] + out[j, i])
+        for j in range(min(i, 9)):
+            P[i, j] = P[j, i]
         P[i, i] += q_diag[i]
 
 
-@njit(cache=True)
-def _spd_inverse(S: F64) -> F64:
-    """Inverse of a small symmetric positive-definite matrix by Cholesky factorisation."""  # pragma: no cover
-    m = S.shape[0]
-    L = np.zeros((m, m))
-    for i in range(m):
-        for j in range(i + 1):
-            acc = S[i, j]
-            for k in range(j):
-                acc -= L[i, k] * L[j, k]
-            if i == j:
-                L[i, i] = math.sqrt(max(acc, 1e-300))
-            else:
-                L[i, j] = acc / L[j, j]
-    Linv = np.zeros((m, m))
-    for i in range(m):
-        Linv[i, i] = 1.0 / L[i, i]
-        for j in range(i):
-            acc = 0.0
-            for k in range(j, i):
-                acc -= L[i, k] * Linv[k, j]
-            Linv[i, j] = acc / L[i, i]
-    out = np.empty((m, m))
-    for i in range(m):
-        for j in range(m):
-            acc = 0.0
-            for k in range(max(i, j), m):
-                acc += Linv[k, i] * Linv[k, j]
-            out[i, j] = acc
-    return out
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _inv3_spd(
+    s00: float, s01: float, s02: float, s11: float, s12: float, s22: float
+) -> tuple[float, float, float, float, float, float]:
+    """Inverse of a symmetric positive-definite 3×3 matrix by Cholesky factorisation, S = L Lᵀ,
+    S⁻¹ = L⁻ᵀ L⁻¹; returns its upper triangle (00, 01, 02, 11, 12, 22)."""  # pragma: no cover
+    l00 = math.sqrt(max(s00, 1e-300))
+    l10 = s01 / l00
+    l20 = s02 / l00
+    l11 = math.sqrt(max(s11 - l10 * l10, 1e-300))
+    l21 = (s12 - l20 * l10) / l11
+    l22 = math.sqrt(max(s22 - l20 * l20 - l21 * l21, 1e-300))
+    i00 = 1.0 / l00
+    i11 = 1.0 / l11
+    i22 = 1.0 / l22
+    i10 = (0.0 - l10 * i00) / l11
+    i21 = (0.0 - l21 * i11) / l22
+    i20 = (0.0 - l20 * i00 - l21 * i10) / l22
+    return (
+        i00 * i00 + i10 * i10 + i20 * i20,
+        i10 * i11 + i20 * i21,
+        i20 * i22,
+        i11 * i11 + i21 * i21,
+        i21 * i22,
+        i22 * i22,
+    )
 
 
-@njit(cache=True)
-def _nis_selected(P: F64, idx: NDArray[np.int64], y: F64, r_diag: F64) -> float:
-    """Normalised innovation squared yᵀ S⁻¹ y of a measurement observing the states ``idx``."""  # pragma: no cover
-    m = idx.shape[0]
-    S = np.empty((m, m))
-    for a in range(m):
-        for b in range(m):
-            S[a, b] = P[idx[a], idx[b]]
-        S[a, a] += r_diag[a]
-    S_inv = _spd_inverse(S)
-    nis = 0.0
-    for a in range(m):
-        for b in range(m):
-            nis += y[a] * S_inv[a, b] * y[b]
-    return nis
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _nis3(P: F64, s0: int, y0: float, y1: float, y2: float, r: float) -> float:
+    """Normalised innovation squared yᵀ S⁻¹ y, S = P[s0:s0+3, s0:s0+3] + r I."""  # pragma: no cover
+    i00, i01, i02, i11, i12, i22 = _inv3_spd(
+        P[s0, s0] + r, P[s0, s0 + 1], P[s0, s0 + 2], P[s0 + 1, s0 + 1] + r, P[s0 + 1, s0 + 2], P[s0 + 2, s0 + 2] + r
+    )
+    return (
+        y0 * i00 * y0
+        + y0 * i01 * y1
+        + y0 * i02 * y2
+        + y1 * i01 * y0
+        + y1 * i11 * y1
+        + y1 * i12 * y2
+        + y2 * i02 * y0
+        + y2 * i12 * y1
+        + y2 * i22 * y2
+    )
 
 
-@njit(cache=True)
-def _update_selected(x: F64, P: F64, idx: NDArray[np.int64], y: F64, r_diag: F64) -> None:
-    """Kalman update for a measurement that observes the error states ``idx`` directly.
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _update3(x: F64, P: F64, s0: int, y: F64, r: float, work: F64) -> None:
+    """Kalman update for a measurement z of the three error states s0, s0+1, s0+2 (noise r I).
 
-    H = rows of the identity at ``idx``. Joseph form, expanded for this H:
-    (I−KH) P (I−KH)ᵀ + K R Kᵀ = P − K P[idx,:] − P[:,idx] Kᵀ + K (P[idx,idx] + R) Kᵀ.
+    H = rows s0..s0+2 of the identity. Joseph form, expanded for this H (only rank-3 work):
+    (I−KH) P (I−KH)ᵀ + K R Kᵀ = P − K P[s,:] − P[:,s] Kᵀ + K (P[s,s] + R) Kᵀ.
     The error is then injected into the nominal state ``x`` and the covariance reset (Solà §7.2-7.3).
+    ``work`` is (10, 15) scratch.
     """  # pragma: no cover
-    m = idx.shape[0]
-    S = np.empty((m, m))
-    for a in range(m):
-        for b in range(m):
-            S[a, b] = P[idx[a], idx[b]]
-        S[a, a] += r_diag[a]
-    S_inv = _spd_inverse(S)
-    K = np.zeros((N_STATE, m))
+    s00, s01, s02 = P[s0, s0] + r, P[s0, s0 + 1], P[s0, s0 + 2]
+    s11, s12, s22 = P[s0 + 1, s0 + 1] + r, P[s0 + 1, s0 + 2], P[s0 + 2, s0 + 2] + r
+    i00, i01, i02, i11, i12, i22 = _inv3_spd(s00, s01, s02, s11, s12, s22)
+    y0, y1, y2 = y[0], y[1], y[2]
+    # rows of ``work``: 0-2 Kᵀ = S⁻¹ P[s, :], 3-5 (K S)ᵀ, 6-8 P[s, :] (kept: P is overwritten), 9 δx
+    for j in range(N_STATE):
+        h0, h1, h2 = P[s0, j], P[s0 + 1, j], P[s0 + 2, j]
+        k0 = h0 * i00 + h1 * i01 + h2 * i02
+        k1 = h0 * i01 + h1 * i11 + h2 * i12
+        k2 = h0 * i02 + h1 * i12 + h2 * i22
+        work[0, j], work[1, j], work[2, j] = k0, k1, k2
+        work[3, j] = (k0 * s00 + k1 * s01 + k2 * s02) - h0
+        work[4, j] = (k0 * s01 + k1 * s11 + k2 * s12) - h1
+        work[5, j] = (k0 * s02 + k1 * s12 + k2 * s22) - h2
+        work[6, j], work[7, j], work[8, j] = h0, h1, h2
+        work[9, j] = k0 * y0 + k1 * y1 + k2 * y2
     for i in range(N_STATE):
-        for b in range(m):
-            acc = 0.0
-            for a in range(m):
-                acc += P[i, idx[a]] * S_inv[a, b]
-            K[i, b] = acc
-    dx = np.zeros(N_STATE)
-    for i in range(N_STATE):
-        for a in range(m):
-            dx[i] += K[i, a] * y[a]
-    KS = np.zeros((N_STATE, m))
-    for i in range(N_STATE):
-        for b in range(m):
-            acc = 0.0
-            for a in range(m):
-                acc += K[i, a] * S[a, b]
-            KS[i, b] = acc
-    Pn = np.empty((N_STATE, N_STATE))
-    for i in range(N_STATE):
+        ki0, ki1, ki2 = work[0, i], work[1, i], work[2, i]
+        di0, di1, di2 = work[3, i], work[4, i], work[5, i]
         for j in range(i, N_STATE):
-            acc = P[i, j]
-            for a in range(m):
-                acc += -K[i, a] * P[idx[a], j] - P[i, idx[a]] * K[j, a] + KS[i, a] * K[j, a]
-            Pn[i, j] = acc
-            Pn[j, i] = acc
-    # injection
-    for r in range(3):
-        x[r] += dx[P0 + r]
-        x[3 + r] += dx[V0 + r]
-        x[10 + r] += dx[BA0 + r]
-        x[13 + r] += dx[BG0 + r]
-    half = np.empty(3)
-    for r in range(3):
-        half[r] = 0.5 * dx[TH0 + r]
-    q = quat_mul(quat_from_rotvec(dx[TH0 : TH0 + 3].copy()), x[6:10])
-    q /= math.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2)
-    x[6:10] = q
-    # reset: P ← G P Gᵀ with G = I except G[θ,θ] = I + [δθ/2]× for a global attitude error
-    # (Solà §7.3.2; from Exp(δθ⁺) = Exp(δθ) Exp(−δθ̂) to first order)
-    rows = Pn.copy()
-    _skew_times_block_rows(Pn, TH0, TH0, half, 1.0, rows)
-    cols = rows.T.copy()
-    out = cols.copy()
-    _skew_times_block_rows(cols, TH0, TH0, half, 1.0, out)
+            P[i, j] = (
+                P[i, j]
+                + (di0 * work[0, j] - ki0 * work[6, j])
+                + (di1 * work[1, j] - ki1 * work[7, j])
+                + (di2 * work[2, j] - ki2 * work[8, j])
+            )
     for i in range(N_STATE):
-        for j in range(N_STATE):
-            P[i, j] = 0.5 * (out[i, j] + out[j, i])
+        for j in range(i):
+            P[i, j] = P[j, i]
+    # injection
+    for r3 in range(3):
+        x[r3] += work[9, P0 + r3]
+        x[3 + r3] += work[9, V0 + r3]
+        x[10 + r3] += work[9, BA0 + r3]
+        x[13 + r3] += work[9, BG0 + r3]
+    dth0, dth1, dth2 = work[9, TH0], work[9, TH0 + 1], work[9, TH0 + 2]
+    ew, ex, ey, ez = quat_from_rotvec_s(dth0, dth1, dth2)
+    qw, qx, qy, qz = quat_mul_s(ew, ex, ey, ez, x[6], x[7], x[8], x[9])
+    norm = math.sqrt(qw**2 + qx**2 + qy**2 + qz**2)
+    x[6], x[7], x[8], x[9] = qw / norm, qx / norm, qy / norm, qz / norm
+    # reset: P ← G P Gᵀ with G = I except G[θ,θ] = I + [δθ/2]× for a global attitude error
+    # (Solà §7.3.2; from Exp(δθ⁺) = Exp(δθ) Exp(−δθ̂) to first order). Rows θ, then columns θ.
+    h0, h1, h2 = 0.5 * dth0, 0.5 * dth1, 0.5 * dth2
+    for j in range(N_STATE):
+        a0, a1, a2 = P[TH0, j], P[TH0 + 1, j], P[TH0 + 2, j]
+        P[TH0, j] = a0 + (-h2 * a1 + h1 * a2)
+        P[TH0 + 1, j] = a1 + (h2 * a0 - h0 * a2)
+        P[TH0 + 2, j] = a2 + (-h1 * a0 + h0 * a1)
+    for i in range(N_STATE):
+        a0, a1, a2 = P[i, TH0], P[i, TH0 + 1], P[i, TH0 + 2]
+        P[i, TH0] = a0 + (-h2 * a1 + h1 * a2)
+        P[i, TH0 + 1] = a1 + (h2 * a0 - h0 * a2)
+        P[i, TH0 + 2] = a2 + (-h1 * a0 + h0 * a1)
+    # outside the θθ block the two sides agree exactly; inside it, average them
+    for a in range(3):
+        for b in range(a + 1, 3):
+            m = 0.5 * (P[TH0 + a, TH0 + b] + P[TH0 + b, TH0 + a])
+            P[TH0 + a, TH0 + b] = m
+            P[TH0 + b, TH0 + a] = m
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", fastmath={"contract"})
 def run_filter(
     x: F64,
     P: F64,
@@ -247,18 +253,19 @@ def run_filter(
         par: (N_PAR,) parameters (see the PAR_* indices).
         out_pos, out_vel: (n, 3) outputs; out_quat (n, 4); out_pos_cov (n, 3, 3).
         counters: (N_CNT,) incremented in place (see the CNT_* indices).
+
+    All scratch space is allocated once per call, none per sample.
     """  # pragma: no cover
     n = acc_b_mps2.shape[0]
     g = par[PAR_G]
     q_diag = np.zeros(N_STATE)
-    idx_v = np.array([V0, V0 + 1, V0 + 2], dtype=np.int64)
-    idx_bg = np.array([BG0, BG0 + 1, BG0 + 2], dtype=np.int64)
-    r_zupt = np.full(3, par[PAR_ZUPT] ** 2)
-    r_zaru = np.full(3, par[PAR_ZARU] ** 2)
+    r_zaru = par[PAR_ZARU] ** 2
     y = np.empty(3)
-    omega = np.empty(3)
-    f_b = np.empty(3)
-    rv = np.empty(3)
+    f_n = np.empty(3)
+    R0 = np.empty((3, 3))
+    R1 = np.empty((3, 3))
+    M = np.empty((9, N_STATE))
+    work = np.empty((10, N_STATE))
     for k in range(n):
         dt = dt_s[k]
         bad = False
@@ -272,28 +279,33 @@ def run_filter(
         else:
             if dt > par[PAR_DT_MAX]:
                 counters[CNT_GAP] += 1
-            R0 = quat_to_mat(x[6:10])
+            quat_to_mat_into(x[6], x[7], x[8], x[9], R0)
             if bad:
                 # no usable sample: hold the nominal motion, let the uncertainty grow
-                for r in range(3):
-                    omega[r] = 0.0
-                    f_b[r] = 0.0
-                f_n = np.zeros(3)
-                f_n[2] = g
+                f_n[0], f_n[1], f_n[2] = 0.0, 0.0, g
             else:
+                w0 = gyr_b_radps[k, 0] - x[13]
+                w1 = gyr_b_radps[k, 1] - x[14]
+                w2 = gyr_b_radps[k, 2] - x[15]
+                fb0 = acc_b_mps2[k, 0] - x[10]
+                fb1 = acc_b_mps2[k, 1] - x[11]
+                fb2 = acc_b_mps2[k, 2] - x[12]
+                ew, ex, ey, ez = quat_from_rotvec_s(w0 * dt, w1 * dt, w2 * dt)
+                qw, qx, qy, qz = quat_mul_s(x[6], x[7], x[8], x[9], ew, ex, ey, ez)
+                norm = math.sqrt(qw**2 + qx**2 + qy**2 + qz**2)
+                qw, qx, qy, qz = qw / norm, qx / norm, qy / norm, qz / norm
+                x[6], x[7], x[8], x[9] = qw, qx, qy, qz
+                quat_to_mat_into(qw, qx, qy, qz, R1)
                 for r in range(3):
-                    omega[r] = gyr_b_radps[k, r] - x[13 + r]
-                    f_b[r] = acc_b_mps2[k, r] - x[10 + r]
-                    rv[r] = omega[r] * dt
-                q = quat_mul(x[6:10], quat_from_rotvec(rv))
-                q /= math.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2)
-                x[6:10] = q
-                R1 = quat_to_mat(q)
-                f_n = np.zeros(3)
+                    f_n[r] = (
+                        0.0
+                        + 0.5 * (R0[r, 0] + R1[r, 0]) * fb0
+                        + 0.5 * (R0[r, 1] + R1[r, 1]) * fb1
+                        + 0.5 * (R0[r, 2] + R1[r, 2]) * fb2
+                    )
                 for r in range(3):
                     for c in range(3):
-                        f_n[r] += 0.5 * (R0[r, c] + R1[r, c]) * f_b[c]
-                R0 = R1
+                        R0[r, c] = R1[r, c]
             for r in range(3):
                 a = f_n[r] - (g if r == 2 else 0.0)
                 x[r] += x[3 + r] * dt + 0.5 * a * dt * dt
@@ -303,20 +315,18 @@ def run_filter(
                 q_diag[TH0 + r] = (par[PAR_SIG_GYR] * dt) ** 2
                 q_diag[BA0 + r] = par[PAR_BA_RW] ** 2 * dt
                 q_diag[BG0 + r] = par[PAR_BG_RW] ** 2 * dt
-            _propagate_cov(P, R0, f_n, dt, q_diag)
+            _propagate_cov(P, M, R0, f_n, dt, q_diag)
         if stance[k] and not bad:
             w2 = 0.0
             for r in range(3):
                 y[r] = -x[3 + r]
                 w2 += (gyr_b_radps[k, r] - x[13 + r]) ** 2
-            for r in range(3):
-                r_zupt[r] = par[PAR_ZUPT] ** 2 + par[PAR_ROLL_LEVER] ** 2 * w2
-            _update_selected(x, P, idx_v, y, r_zupt)
+            _update3(x, P, V0, y, par[PAR_ZUPT] ** 2 + par[PAR_ROLL_LEVER] ** 2 * w2, work)
             counters[CNT_UPDATES] += 1
             for r in range(3):
                 y[r] = gyr_b_radps[k, r] - x[13 + r]
-            if _nis_selected(P, idx_bg, y, r_zaru) < par[PAR_ZARU_GATE]:
-                _update_selected(x, P, idx_bg, y, r_zaru)
+            if _nis3(P, BG0, y[0], y[1], y[2], r_zaru) < par[PAR_ZARU_GATE]:
+                _update3(x, P, BG0, y, r_zaru, work)
                 counters[CNT_ZARU] += 1
             else:
                 counters[CNT_ZARU_REJECTED] += 1

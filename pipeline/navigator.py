@@ -145,7 +145,8 @@ class Navigator:
         threshold = np.concatenate([t for _, _, t, _ in self._pending])
         still = np.concatenate([z for _, _, _, z in self._pending])
         need = max(2, round(self.config.align_s * self.rate_hz))
-        start = _first_run(self._quiet(batch), need)
+        # (fewer samples than one quiet period cannot align; _quiet needs at least `need` of them)
+        start = _first_run(self._quiet(batch), need) if len(batch) >= need else -1
         if start < 0:
             keep = round(self.config.max_wait_s * self.rate_hz)
             if len(batch) > keep:  # bound memory while the unit never rests
@@ -245,7 +246,9 @@ def _first_run(mask: NDArray[np.bool_], length: int) -> int:
     """Index of the first run of at least ``length`` True values in ``mask``, or −1."""
     if mask.size < length:
         return -1
-    run = np.convolve(mask.astype(np.int64), np.ones(length, dtype=np.int64), mode="valid")
+    # run[i] = Σ mask[i:i+length], exactly (integer prefix sums: O(n), not O(n · length))
+    csum = np.concatenate([[0], np.cumsum(mask, dtype=np.int64)])
+    run = csum[length:] - csum[:-length]
     hits = np.flatnonzero(run == length)
     return int(hits[0]) if hits.size else -1
 

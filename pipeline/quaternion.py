@@ -2,6 +2,9 @@
 
 Conventions follow Solà, "Quaternion kinematics for the error-state Kalman filter" (2017): Hamilton
 product, ``q_nb`` rotates body vectors into the navigation frame, ``v_n = R(q_nb) v_b``.
+
+The ``*_s`` and ``*_into`` variants take and return scalars or write into a given array, so compiled
+per-sample loops (``pipeline.eskf``) allocate nothing; the array versions wrap them.
 """
 
 from __future__ import annotations
@@ -15,41 +18,32 @@ from numpy.typing import NDArray
 F64 = NDArray[np.float64]
 
 
-@njit(cache=True, fastmath=False)
-def quat_mul(p: F64, q: F64) -> F64:  # pragma: no cover - compiled
-    """Hamilton product ``p ⊗ q`` of two (4,) scalar-first quaternions (Solà eq. 12)."""
-    out = np.empty(4)
-    out[0] = p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3]
-    out[1] = p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2]
-    out[2] = p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1]
-    out[3] = p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0]
-    return out
+@njit(cache=True, inline="always")
+def quat_mul_s(
+    pw: float, px: float, py: float, pz: float, qw: float, qx: float, qy: float, qz: float
+) -> tuple[float, float, float, float]:  # pragma: no cover - compiled
+    """Hamilton product ``p ⊗ q`` on scalars (no allocation, for compiled loops); see ``quat_mul``."""
+    return (
+        pw * qw - px * qx - py * qy - pz * qz,
+        pw * qx + px * qw + py * qz - pz * qy,
+        pw * qy - px * qz + py * qw + pz * qx,
+        pw * qz + px * qy - py * qx + pz * qw,
+    )
 
 
-@njit(cache=True)
-def quat_from_rotvec(rv: F64) -> F64:  # pragma: no cover - compiled
-    """Quaternion of the rotation vector ``rv`` (3,) rad: ``exp(rv/2)`` (Solà eq. 101)."""
-    angle = math.sqrt(rv[0] * rv[0] + rv[1] * rv[1] + rv[2] * rv[2])
-    out = np.empty(4)
+@njit(cache=True, inline="always")
+def quat_from_rotvec_s(rx: float, ry: float, rz: float) -> tuple[float, float, float, float]:  # pragma: no cover
+    """``exp(rv/2)`` of the rotation vector (rx, ry, rz) rad, on scalars; see ``quat_from_rotvec``."""
+    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
     if angle < 1e-9:
-        out[0] = 1.0 - angle * angle / 8.0
-        out[1] = 0.5 * rv[0]
-        out[2] = 0.5 * rv[1]
-        out[3] = 0.5 * rv[2]
-    else:
-        s = math.sin(0.5 * angle) / angle
-        out[0] = math.cos(0.5 * angle)
-        out[1] = s * rv[0]
-        out[2] = s * rv[1]
-        out[3] = s * rv[2]
-    return out
+        return 1.0 - angle * angle / 8.0, 0.5 * rx, 0.5 * ry, 0.5 * rz
+    s = math.sin(0.5 * angle) / angle
+    return math.cos(0.5 * angle), s * rx, s * ry, s * rz
 
 
-@njit(cache=True)
-def quat_to_mat(q: F64) -> F64:  # pragma: no cover - compiled
-    """Rotation matrix (3, 3) of a unit quaternion (Solà eq. 115)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    m = np.empty((3, 3))
+@njit(cache=True, inline="always")
+def quat_to_mat_into(w: float, x: float, y: float, z: float, m: F64) -> None:  # pragma: no cover - compiled
+    """Write the rotation matrix of the unit quaternion (w, x, y, z) into ``m`` (3, 3); see ``quat_to_mat``."""
     m[0, 0] = w * w + x * x - y * y - z * z
     m[0, 1] = 2.0 * (x * y - w * z)
     m[0, 2] = 2.0 * (x * z + w * y)
@@ -59,6 +53,29 @@ def quat_to_mat(q: F64) -> F64:  # pragma: no cover - compiled
     m[2, 0] = 2.0 * (x * z - w * y)
     m[2, 1] = 2.0 * (y * z + w * x)
     m[2, 2] = w * w - x * x - y * y + z * z
+
+
+@njit(cache=True)
+def quat_mul(p: F64, q: F64) -> F64:  # pragma: no cover - compiled
+    """Hamilton product ``p ⊗ q`` of two (4,) scalar-first quaternions (Solà eq. 12)."""
+    out = np.empty(4)
+    out[0], out[1], out[2], out[3] = quat_mul_s(p[0], p[1], p[2], p[3], q[0], q[1], q[2], q[3])
+    return out
+
+
+@njit(cache=True)
+def quat_from_rotvec(rv: F64) -> F64:  # pragma: no cover - compiled
+    """Quaternion of the rotation vector ``rv`` (3,) rad: ``exp(rv/2)`` (Solà eq. 101)."""
+    out = np.empty(4)
+    out[0], out[1], out[2], out[3] = quat_from_rotvec_s(rv[0], rv[1], rv[2])
+    return out
+
+
+@njit(cache=True)
+def quat_to_mat(q: F64) -> F64:  # pragma: no cover - compiled
+    """Rotation matrix (3, 3) of a unit quaternion (Solà eq. 115)."""
+    m = np.empty((3, 3))
+    quat_to_mat_into(q[0], q[1], q[2], q[3], m)
     return m
 
 

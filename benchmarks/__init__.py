@@ -1,0 +1,4 @@
+"""Throughput benchmarks of footnav's estimators against a plain numpy baseline.
+
+Run ``python -m benchmarks`` from the repository root (see ``benchmarks/README.md``).
+"""

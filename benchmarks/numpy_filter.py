@@ -1,0 +1,174 @@
+"""The navigation filter of ``pipeline.eskf`` written plainly: one Python iteration per sample, numpy
+(15, 15) matrices, ``F P Fᵀ + Q`` with full matrices, Joseph-form updates with ``np.linalg``.
+
+Two uses: the baseline the compiled filter's speed is quoted against (``python -m benchmarks``), and
+an independent reference for its results (``tests/test_filter_reference.py``). It follows the model,
+the parameters and the bad-input rules of ``pipeline.eskf.run_filter`` exactly, but none of its
+shortcuts (block-sparse propagation, rank-3 updates, one-triangle symmetry), so agreement checks them.
+
+References: Solà, "Quaternion kinematics for the error-state Kalman filter" (arXiv:1711.02508, 2017),
+sections 5-7; the model equations are in the ``pipeline.eskf`` module docstring.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline import eskf
+
+F64 = NDArray[np.float64]
+
+_P = slice(0, 3)
+_V = slice(3, 6)
+_TH = slice(6, 9)
+_BA = slice(9, 12)
+_BG = slice(12, 15)
+_I3 = np.eye(3)
+_I15 = np.eye(15)
+
+
+@dataclass(frozen=True, slots=True)
+class FilterRun:
+    """Outputs of one run, shaped like ``pipeline.eskf.run_filter``'s.
+
+    Attributes:
+        pos_n_m, vel_n_mps: (n, 3); quat_nb_wxyz: (n, 4); pos_cov_n_m2: (n, 3, 3).
+        counters: (eskf.N_CNT,) the same counts as ``run_filter`` (see ``eskf.CNT_*``).
+        x, P: the final nominal state (16,) and error covariance (15, 15).
+    """
+
+    pos_n_m: F64
+    vel_n_mps: F64
+    quat_nb_wxyz: F64
+    pos_cov_n_m2: F64
+    counters: NDArray[np.int64]
+    x: F64
+    P: F64
+
+
+def skew(v: F64) -> F64:
+    """[v]×, the (3, 3) cross-product matrix of v (3,)."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def quat_mul(p: F64, q: F64) -> F64:
+    """Hamilton product p ⊗ q of scalar-first quaternions: [p]_L q (Solà eqs. 12, 18)."""
+    left = np.array(
+        [
+            [p[0], -p[1], -p[2], -p[3]],
+            [p[1], p[0], -p[3], p[2]],
+            [p[2], p[3], p[0], -p[1]],
+            [p[3], -p[2], p[1], p[0]],
+        ]
+    )
+    return left @ q
+
+
+def quat_exp(rv: F64) -> F64:
+    """Quaternion of the rotation vector rv (3,) rad (Solà eq. 101)."""
+    angle = float(np.linalg.norm(rv))
+    if angle < 1e-9:
+        return np.concatenate([[1.0 - angle * angle / 8.0], 0.5 * rv])
+    return np.concatenate([[math.cos(0.5 * angle)], math.sin(0.5 * angle) / angle * rv])
+
+
+def quat_to_mat(q: F64) -> F64:
+    """Rotation matrix (3, 3) of a unit quaternion: R = (w² − vᵀv) I + 2 v vᵀ + 2 w [v]× (Solà eq. 115)."""
+    w, v = q[0], q[1:]
+    return (w * w - v @ v) * _I3 + 2.0 * np.outer(v, v) + 2.0 * w * skew(v)
+
+
+def _update(x: F64, P: F64, H: F64, y: F64, R: F64) -> tuple[F64, F64]:
+    """Kalman update in Joseph form, injection and reset; returns the new (x, P)."""
+    S = H @ P @ H.T + R
+    K = np.linalg.solve(S, H @ P).T  # P Hᵀ S⁻¹ (S and P symmetric)
+    I_KH = _I15 - K @ H
+    P = I_KH @ P @ I_KH.T + K @ R @ K.T
+    dx = K @ y
+    x = x.copy()
+    x[0:6] += dx[0:6]
+    x[10:16] += dx[9:15]
+    q = quat_mul(quat_exp(dx[_TH]), x[6:10])
+    x[6:10] = q / np.linalg.norm(q)
+    G = _I15.copy()
+    G[_TH, _TH] += skew(0.5 * dx[_TH])
+    P = G @ P @ G.T
+    return x, 0.5 * (P + P.T)
+
+
+def run_filter_numpy(
+    x: F64,
+    P: F64,
+    acc_b_mps2: F64,
+    gyr_b_radps: F64,
+    dt_s: F64,
+    stance: NDArray[np.bool_],
+    par: F64,
+) -> FilterRun:
+    """Run the filter sample by sample; arguments as ``pipeline.eskf.run_filter`` (not modified)."""
+    n = acc_b_mps2.shape[0]
+    x, P = x.astype(np.float64).copy(), P.astype(np.float64).copy()
+    g = par[eskf.PAR_G]
+    g_n = np.array([0.0, 0.0, g])
+    counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+    H_v = _I15[_V]
+    H_bg = _I15[_BG]
+    R_zaru = par[eskf.PAR_ZARU] ** 2 * _I3
+    pos, vel = np.empty((n, 3)), np.empty((n, 3))
+    quat, pos_cov = np.empty((n, 4)), np.empty((n, 3, 3))
+    for k in range(n):
+        dt = float(dt_s[k])
+        bad = not (np.isfinite(acc_b_mps2[k]).all() and np.isfinite(gyr_b_radps[k]).all())
+        counters[eskf.CNT_BAD_SAMPLE] += bad
+        if not (dt > 0.0 and math.isfinite(dt)):
+            counters[eskf.CNT_BAD_DT] += 1
+        else:
+            counters[eskf.CNT_GAP] += dt > par[eskf.PAR_DT_MAX]
+            R = quat_to_mat(x[6:10])
+            if bad:  # hold the nominal motion, let the uncertainty grow
+                f_n = g_n.copy()
+            else:
+                omega = gyr_b_radps[k] - x[13:16]
+                f_b = acc_b_mps2[k] - x[10:13]
+                q = quat_mul(x[6:10], quat_exp(omega * dt))
+                x[6:10] = q / np.linalg.norm(q)
+                R_new = quat_to_mat(x[6:10])
+                f_n = 0.5 * (R + R_new) @ f_b
+                R = R_new
+            a = f_n - g_n
+            x[0:3] += x[3:6] * dt + 0.5 * a * dt * dt
+            x[3:6] += a * dt
+            F = _I15.copy()
+            F[_P, _V] = dt * _I3
+            F[_V, _TH] = -dt * skew(f_n)
+            F[_V, _BA] = -dt * R
+            F[_TH, _BG] = -dt * R
+            q_block = [
+                0.0,
+                (par[eskf.PAR_SIG_ACC] * dt) ** 2,
+                (par[eskf.PAR_SIG_GYR] * dt) ** 2,
+                par[eskf.PAR_BA_RW] ** 2 * dt,
+                par[eskf.PAR_BG_RW] ** 2 * dt,
+            ]
+            Q = np.diag(np.repeat(q_block, 3))
+            P = F @ P @ F.T + Q
+            P = 0.5 * (P + P.T)
+        if stance[k] and not bad:
+            omega = gyr_b_radps[k] - x[13:16]
+            r_zupt = par[eskf.PAR_ZUPT] ** 2 + par[eskf.PAR_ROLL_LEVER] ** 2 * float(omega @ omega)
+            x, P = _update(x, P, H_v, -x[3:6], r_zupt * _I3)
+            counters[eskf.CNT_UPDATES] += 1
+            y = gyr_b_radps[k] - x[13:16]
+            S = H_bg @ P @ H_bg.T + R_zaru
+            if float(y @ np.linalg.solve(S, y)) < par[eskf.PAR_ZARU_GATE]:
+                x, P = _update(x, P, H_bg, y, R_zaru)
+                counters[eskf.CNT_ZARU] += 1
+            else:
+                counters[eskf.CNT_ZARU_REJECTED] += 1
+        pos[k], vel[k], quat[k] = x[0:3], x[3:6], x[6:10]
+        pos_cov[k] = P[_P, _P]
+    return FilterRun(pos, vel, quat, pos_cov, counters, x, P)
