@@ -23,6 +23,7 @@ from pipeline import eskf
 F64 = NDArray[np.float64]
 
 _P = slice(0, 3)
+_POS_YAW = [0, 1, 2, 8]  # x, y, z and the heading error
 _V = slice(3, 6)
 _TH = slice(6, 9)
 _BA = slice(9, 12)
@@ -36,7 +37,7 @@ class FilterRun:
     """Outputs of one run, shaped like ``pipeline.eskf.run_filter``'s.
 
     Attributes:
-        pos_n_m, vel_n_mps: (n, 3); quat_nb_wxyz: (n, 4); pos_cov_n_m2: (n, 3, 3).
+        pos_n_m, vel_n_mps: (n, 3); quat_nb_wxyz: (n, 4); pos_cov_n_m2: (n, 4, 4) of (x, y, z, ψ).
         counters: (eskf.N_CNT,) the same counts as ``run_filter`` (see ``eskf.CNT_*``).
         x, P: the final nominal state (16,) and error covariance (15, 15).
     """
@@ -119,7 +120,7 @@ def run_filter_numpy(
     H_bg = _I15[_BG]
     R_zaru = par[eskf.PAR_ZARU] ** 2 * _I3
     pos, vel = np.empty((n, 3)), np.empty((n, 3))
-    quat, pos_cov = np.empty((n, 4)), np.empty((n, 3, 3))
+    quat, pos_cov = np.empty((n, 4)), np.empty((n, 4, 4))
     for k in range(n):
         dt = float(dt_s[k])
         bad = not (np.isfinite(acc_b_mps2[k]).all() and np.isfinite(gyr_b_radps[k]).all())
@@ -129,11 +130,13 @@ def run_filter_numpy(
         else:
             counters[eskf.CNT_GAP] += dt > par[eskf.PAR_DT_MAX]
             R = quat_to_mat(x[6:10])
+            f2 = w2 = 0.0
             if bad:  # hold the nominal motion, let the uncertainty grow
                 f_n = g_n.copy()
             else:
                 omega = gyr_b_radps[k] - x[13:16]
                 f_b = acc_b_mps2[k] - x[10:13]
+                f2, w2 = float(f_b @ f_b), float(omega @ omega)
                 q = quat_mul(x[6:10], quat_exp(omega * dt))
                 x[6:10] = q / np.linalg.norm(q)
                 R_new = quat_to_mat(x[6:10])
@@ -149,8 +152,8 @@ def run_filter_numpy(
             F[_TH, _BG] = -dt * R
             q_block = [
                 0.0,
-                (par[eskf.PAR_SIG_ACC] * dt) ** 2,
-                (par[eskf.PAR_SIG_GYR] * dt) ** 2,
+                (par[eskf.PAR_SIG_ACC] ** 2 + par[eskf.PAR_ACC_SCALE] ** 2 * f2) * dt * dt,
+                (par[eskf.PAR_SIG_GYR] ** 2 + par[eskf.PAR_GYR_SCALE] ** 2 * w2) * dt * dt,
                 par[eskf.PAR_BA_RW] ** 2 * dt,
                 par[eskf.PAR_BG_RW] ** 2 * dt,
             ]
@@ -170,5 +173,5 @@ def run_filter_numpy(
             else:
                 counters[eskf.CNT_ZARU_REJECTED] += 1
         pos[k], vel[k], quat[k] = x[0:3], x[3:6], x[6:10]
-        pos_cov[k] = P[_P, _P]
+        pos_cov[k] = P[np.ix_(_POS_YAW, _POS_YAW)]
     return FilterRun(pos, vel, quat, pos_cov, counters, x, P)

@@ -58,8 +58,10 @@ P0, V0, TH0, BA0, BG0 = 0, 3, 6, 9, 12
     PAR_DT_MAX,
     PAR_ZARU_GATE,
     PAR_ROLL_LEVER,
-) = range(10)
-N_PAR = 10
+    PAR_ACC_SCALE,
+    PAR_GYR_SCALE,
+) = range(12)
+N_PAR = 12
 
 # counters returned by run_filter
 CNT_BAD_DT, CNT_GAP, CNT_BAD_SAMPLE, CNT_UPDATES, CNT_ZARU, CNT_ZARU_REJECTED = range(6)
@@ -227,6 +229,27 @@ def _update3(x: F64, P: F64, s0: int, y: F64, r: float, work: F64) -> None:
             P[TH0 + b, TH0 + a] = m
 
 
+_POS_YAW = (P0, P0 + 1, P0 + 2, TH0 + 2)  # error-state indices of x, y, z and the heading
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _process_noise(par: F64, f2: float, w2: float, dt: float, q_diag: F64) -> None:
+    """Diagonal of Q for one interval (Solà §5.4.3, with per-sample noise σ over dt).
+
+    Specific-force and rate noise have a constant part (white noise and unmodelled vibration) and a
+    part proportional to the signal, σ² = σ0² + (k |s|)², for what scale-factor, cross-axis and
+    timing errors add: an error of a fraction k of the signal (IEEE Std 952-1997 / 1293-1998 error
+    models; Groves 2013 §4.4). ``f2`` = |f_b|², ``w2`` = |ω_b|² of the sample.
+    """  # pragma: no cover
+    q_acc = (par[PAR_SIG_ACC] ** 2 + par[PAR_ACC_SCALE] ** 2 * f2) * dt * dt
+    q_gyr = (par[PAR_SIG_GYR] ** 2 + par[PAR_GYR_SCALE] ** 2 * w2) * dt * dt
+    for r in range(3):
+        q_diag[V0 + r] = q_acc
+        q_diag[TH0 + r] = q_gyr
+        q_diag[BA0 + r] = par[PAR_BA_RW] ** 2 * dt
+        q_diag[BG0 + r] = par[PAR_BG_RW] ** 2 * dt
+
+
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
 def run_filter(
     x: F64,
@@ -239,7 +262,7 @@ def run_filter(
     out_pos: F64,
     out_vel: F64,
     out_quat: F64,
-    out_pos_cov: F64,
+    out_cov: F64,
     counters: NDArray[np.int64],
 ) -> None:
     """Run the filter over a batch, updating ``x`` (16,) and ``P`` (15, 15) in place.
@@ -251,12 +274,28 @@ def run_filter(
             (duplicated timestamps); intervals above ``par[PAR_DT_MAX]`` are counted as gaps.
         stance: (n,) apply ZUPT + ZARU after propagating sample k.
         par: (N_PAR,) parameters (see the PAR_* indices).
-        out_pos, out_vel: (n, 3) outputs; out_quat (n, 4); out_pos_cov (n, 3, 3).
+        out_pos, out_vel: (n, 3) outputs; out_quat (n, 4); out_cov (n, 4, 4): the covariance of
+            (x, y, z, ψ), position and the heading error (the z component of δθ).
         counters: (N_CNT,) incremented in place (see the CNT_* indices).
 
     All scratch space is allocated once per call, none per sample.
     """  # pragma: no cover
     n = acc_b_mps2.shape[0]
+    # numba does not check bounds: refuse shapes that would write outside the outputs
+    if (
+        gyr_b_radps.shape[0] != n
+        or dt_s.shape[0] != n
+        or stance.shape[0] != n
+        or out_pos.shape[0] < n
+        or out_vel.shape[0] < n
+        or out_quat.shape[0] < n
+        or out_cov.shape[0] < n
+        or out_cov.shape[1] != 4
+        or out_cov.shape[2] != 4
+        or par.shape[0] != N_PAR
+        or counters.shape[0] != N_CNT
+    ):
+        raise ValueError("run_filter: inconsistent array shapes")
     g = par[PAR_G]
     q_diag = np.zeros(N_STATE)
     r_zaru = par[PAR_ZARU] ** 2
@@ -310,11 +349,12 @@ def run_filter(
                 a = f_n[r] - (g if r == 2 else 0.0)
                 x[r] += x[3 + r] * dt + 0.5 * a * dt * dt
                 x[3 + r] += a * dt
-            for r in range(3):
-                q_diag[V0 + r] = (par[PAR_SIG_ACC] * dt) ** 2
-                q_diag[TH0 + r] = (par[PAR_SIG_GYR] * dt) ** 2
-                q_diag[BA0 + r] = par[PAR_BA_RW] ** 2 * dt
-                q_diag[BG0 + r] = par[PAR_BG_RW] ** 2 * dt
+            if bad:
+                f2, w2 = 0.0, 0.0
+            else:
+                f2 = fb0 * fb0 + fb1 * fb1 + fb2 * fb2
+                w2 = w0 * w0 + w1 * w1 + w2 * w2
+            _process_noise(par, f2, w2, dt, q_diag)
             _propagate_cov(P, M, R0, f_n, dt, q_diag)
         if stance[k] and not bad:
             w2 = 0.0
@@ -333,7 +373,8 @@ def run_filter(
         for r in range(3):
             out_pos[k, r] = x[r]
             out_vel[k, r] = x[3 + r]
-            for c in range(3):
-                out_pos_cov[k, r, c] = P[P0 + r, P0 + c]
+        for r in range(4):
+            for c in range(4):
+                out_cov[k, r, c] = P[_POS_YAW[r], _POS_YAW[c]]
         for r in range(4):
             out_quat[k, r] = x[6 + r]

@@ -27,6 +27,8 @@ class NavBatch:
         detector_threshold: (n,) the threshold in force at each sample (it adapts to the gait).
         clearance_m: (n,) height of the IMU above the floor the walk started on, m.
         host_ns: (n,) host receive time of each sample (latency accounting).
+        cov_pos_yaw: (n, 4, 4) covariance of (x, y, z, ψ) when the estimator provides it (steps,
+            heading uncertainty); ``pos_cov_n_m2`` is its upper-left block.
     """
 
     t_s: F64
@@ -39,6 +41,7 @@ class NavBatch:
     detector_threshold: F64
     clearance_m: F64
     host_ns: NDArray[np.int64]
+    cov_pos_yaw: F64 | None = None
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])

@@ -96,6 +96,8 @@ def filter_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float,
     par[eskf.PAR_DT_MAX] = dt_max_s
     par[eskf.PAR_ZARU_GATE] = ZARU_GATE_CHI2_3DOF
     par[eskf.PAR_ROLL_LEVER] = profile.roll_lever_m
+    par[eskf.PAR_ACC_SCALE] = profile.acc_scale_error
+    par[eskf.PAR_GYR_SCALE] = profile.gyr_scale_error
     return par
 
 
@@ -207,7 +209,7 @@ class Navigator:
         dt = np.diff(batch.t_s, prepend=self._t_last)
         self._t_last = float(batch.t_s[-1])
         pos, vel = np.empty((n, 3)), np.empty((n, 3))
-        quat, pos_cov = np.empty((n, 4)), np.empty((n, 3, 3))
+        quat, cov = np.empty((n, 4)), np.empty((n, 4, 4))
         eskf.run_filter(
             self._x,
             self._P,
@@ -219,7 +221,7 @@ class Navigator:
             pos,
             vel,
             quat,
-            pos_cov,
+            cov,
             self._counters,
         )
         c = self._counters
@@ -233,12 +235,13 @@ class Navigator:
             pos_n_m=pos,
             vel_n_mps=vel,
             quat_nb_wxyz=quat,
-            pos_cov_n_m2=pos_cov,
+            pos_cov_n_m2=cov[:, :3, :3],
             stance=still,
             detector_stat=stat,
             detector_threshold=threshold,
             clearance_m=pos[:, 2].copy(),
             host_ns=batch.host_ns,
+            cov_pos_yaw=cov,
         )
 
 

@@ -27,11 +27,14 @@ class UnitProfile:
         gyr_bias_init_radps: 1σ turn-on gyroscope bias left after calibration, rad/s.
         motion_acc_mps2: extra process noise on specific force covering vibration, quantisation
             and unmodelled high-frequency foot dynamics (1σ per sample), m/s². Foot-mounted
-            filters inflate this well above the sensor noise (OpenShoe uses 0.7 m/s², pyshoe 0.5).
+            filters inflate this well above the sensor noise (OpenShoe uses 0.7 m/s², pyshoe 0.5);
+            here part of that moves into the signal-proportional term below.
         motion_gyr_radps: likewise for angular rate, rad/s (OpenShoe 0.3°/s, pyshoe 0.5°/s).
         zupt_sigma_mps: zero-velocity pseudo-measurement 1σ, m/s (OpenShoe 0.1, pyshoe 0.01).
         zaru_sigma_radps: zero-angular-rate pseudo-measurement 1σ during stance, rad/s: the
             residual rotation of a standing foot plus sensor noise.
+        acc_scale_error, gyr_scale_error: 1σ of the error proportional to the signal (scale factor,
+            cross-axis sensitivity, acc/gyro timing), as a fraction; process noise grows by it.
         roll_lever_m: distance from the IMU to the point the foot rolls about during stance (heel,
             toe), m; the ZUPT noise grows by this times the angular rate (see ``pipeline.eskf``).
     """
@@ -43,11 +46,13 @@ class UnitProfile:
     gyr_bias_rw_radps2_rthz: float
     acc_bias_init_mps2: float
     gyr_bias_init_radps: float
-    motion_acc_mps2: float = 0.5
+    motion_acc_mps2: float = 0.2
     motion_gyr_radps: float = 0.5 * DEG
     zupt_sigma_mps: float = 0.01
     zaru_sigma_radps: float = 0.5 * DEG
     roll_lever_m: float = 0.1  # about half a shoe length
+    acc_scale_error: float = 0.02  # MEMS scale + cross-axis residuals of 0.5-2 % plus acc/gyro skew
+    gyr_scale_error: float = 0.01
 
 
 PROFILES: dict[str, UnitProfile] = {

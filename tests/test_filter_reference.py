@@ -51,7 +51,7 @@ def test_compiled_filter_matches_numpy_reference() -> None:
     n = acc.shape[0]
     ref = run_filter_numpy(x, P, acc, gyr, dt, stance, par)
     x_c, P_c = x.copy(), P.copy()
-    pos, vel, quat, pos_cov = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 3, 3))
+    pos, vel, quat, pos_cov = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
     counters = np.zeros(eskf.N_CNT, dtype=np.int64)
     eskf.run_filter(x_c, P_c, acc, gyr, dt, stance, par, pos, vel, quat, pos_cov, counters)
 
@@ -79,7 +79,7 @@ def test_batches_do_not_change_the_result() -> None:
             m = b - a
             eskf.run_filter(
                 x_c, P_c, acc[a:b], gyr[a:b], dt[a:b], stance[a:b], par,
-                pos[a:b], np.empty((m, 3)), np.empty((m, 4)), np.empty((m, 3, 3)), counters,
+                pos[a:b], np.empty((m, 3)), np.empty((m, 4)), np.empty((m, 4, 4)), counters,
             )  # fmt: skip
         return pos
 
