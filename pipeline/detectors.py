@@ -54,6 +54,8 @@ class DetectorParams:
             sensor noise of MEMS foot units gives T ≈ 0.1-1 at rest.
         history_s, update_s, margin_decades, motion_decades: the adaptive rule.
         min_threshold, max_threshold: bounds of the adaptive threshold (T units).
+        min_stance_s: the statistic must stay below the threshold this long before a sample counts
+            as stance (causal; see ``StreamingDetector._debounce``).
     """
 
     kind: DetectorKind = "shoe"
@@ -69,6 +71,7 @@ class DetectorParams:
     motion_decades: float = 2.0
     min_threshold: float = 10.0
     max_threshold: float = 3e4
+    min_stance_s: float = 0.02
 
 
 _KIND_CODE: dict[str, int] = {"shoe": 0, "amv": 1, "amag": 2, "are": 3}
@@ -368,6 +371,8 @@ class StreamingDetector:
         self._history_len = max(2, round(params.history_s * rate_hz))
         self._update_every = max(1, round(params.update_s * rate_hz))
         self._seen = 0
+        self._run = 0  # consecutive samples below the threshold, carried across batches
+        self._min_run = max(1, round(params.min_stance_s * rate_hz))
         # the adaptive rule's state (see _adaptive_threshold_kernel)
         self._ring = np.full(self._history_len + self._update_every, math.nan)
         self._sorted = np.empty((2, self._history_len + self._update_every))
@@ -413,7 +418,25 @@ class StreamingDetector:
             )
         self._seen += n
         threshold: F64 = 10.0**log_th
-        return stat, threshold, log_stat < log_th
+        return stat, threshold, self._debounce(log_stat < log_th)
+
+    def _debounce(self, below: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """Stance only once the statistic has stayed below the threshold for ``min_stance_s``.
+
+        A swinging foot passes through moments where specific force ≈ g and rotation is small (the
+        ballistic middle of a swing, most of all on stairs); no inertial statistic tells them from
+        rest, but they last a few milliseconds, while a stance lasts a tenth of a second or more.
+        """
+        n = below.shape[0]
+        idx = np.arange(n)
+        # length of the run of True values ending at each sample, continuing the previous batch's run
+        last_false = np.maximum.accumulate(np.where(below, -1, idx))
+        run = np.where(last_false < 0, idx + 1 + self._run, idx - last_false)
+        run[~below] = 0
+        if n:
+            self._run = int(run[-1])
+        still: NDArray[np.bool_] = run >= self._min_run
+        return still
 
     def _statistic(self, acc_b_mps2: F64, gyr_b_radps: F64) -> F64:
         n = acc_b_mps2.shape[0]
