@@ -65,10 +65,11 @@ def test_streaming_is_independent_of_batching(chunk: int, adaptive: bool) -> Non
 @pytest.mark.parametrize("adaptive", [False, True])
 def test_separates_rest_from_motion(adaptive: bool) -> None:
     acc, gyr, moving = _walkish(6000)
-    _, _, still = StreamingDetector(DetectorParams(adaptive=adaptive), 1000.0).update(acc, gyr)
+    det = StreamingDetector(DetectorParams(adaptive=adaptive), 1000.0)
+    _, _, still = det.update(acc, gyr)
     interior = np.ones(6000, bool)
-    for edge in range(0, 6000, 300):  # windows straddling a transition may go either way
-        interior[max(0, edge - 10) : edge + 10] = False
+    for edge in range(0, 6000, 300):  # windows straddling a transition may go either way,
+        interior[max(0, edge - 10) : edge + 10 + det._min_run] = False  # and stance is debounced
     assert still[~moving & interior].all()
     assert not still[moving & interior].any()
 
@@ -84,7 +85,8 @@ def test_adaptive_threshold_follows_the_swing_level() -> None:
     assert th_gentle < th_strong / 10
     _, _, still = StreamingDetector(base, 1000.0).update(gentle_acc, gentle_gyr)
     late = np.arange(8000) > 2000
-    assert still[~moving & late].mean() > 0.95 and still[moving & late].mean() < 0.05
+    settled = late & (np.arange(8000) % 300 >= 40)  # past the 20 ms debounce at each stance onset
+    assert still[~moving & settled].mean() > 0.95 and still[moving & late].mean() < 0.05
     fixed = dataclasses.replace(base, adaptive=False, threshold=th_strong)
     _, _, still_fixed = StreamingDetector(fixed, 1000.0).update(gentle_acc, gentle_gyr)
     assert still_fixed[moving & late].mean() > 0.5  # a threshold fixed for the strong gait fails here
@@ -97,4 +99,23 @@ def test_non_finite_samples_only_spoil_their_windows() -> None:
     stat, _, still = det.update(acc, gyr)
     w = det.window
     assert np.isinf(stat[100 : 100 + w]).all() and not still[100 : 100 + w].any()
-    assert still[100 + w : 290].all()  # the rest of the still period is unaffected
+    assert still[100 + w + det._min_run - 1 : 290].all()  # the rest of the still period is unaffected
+
+
+@pytest.mark.parametrize("chunk", [1, 5, 33])
+def test_debounce_drops_short_dips_and_is_batch_independent(chunk: int) -> None:
+    rng = np.random.default_rng(5)
+    n = 2000
+    acc = np.array([0.0, 0.0, 9.80665]) + rng.normal(0, 5.0, (n, 3))
+    gyr = rng.normal(0, 3.0, (n, 3))
+    acc[500:512] = [0.0, 0.0, 9.80665]  # a 12 ms lull in a swing
+    gyr[500:512] = 0.0
+    acc[1000:1100] = [0.0, 0.0, 9.80665]  # a 100 ms stance
+    gyr[1000:1100] = 0.0
+    p = DetectorParams(adaptive=False)
+    det = StreamingDetector(p, 1000.0)
+    parts = [det.update(acc[i : i + chunk], gyr[i : i + chunk])[2] for i in range(0, n, chunk)]
+    still = np.concatenate(parts)
+    assert not still[480:540].any()
+    assert still[1000 + det.window + det._min_run : 1100].all()
+    np.testing.assert_array_equal(still, StreamingDetector(p, 1000.0).update(acc, gyr)[2])
