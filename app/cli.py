@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import asyncio
 import logging
 import math
 import sys
-import uuid
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pipeline.errors import FootnavError
+
+if TYPE_CHECKING:
+    from app.config import Config
 
 
 def _positive(text: str) -> float:
@@ -26,10 +28,39 @@ def _pace(text: str) -> float:
     return _positive(text.rstrip("x"))
 
 
+def _seconds(text: str) -> float:
+    value = float(text)
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return value
+
+
+def _add_config_args(p: argparse.ArgumentParser, *, profile: bool = True) -> None:
+    from pipeline.profiles import PROFILES
+
+    p.add_argument(
+        "--config", type=Path, metavar="FILE", help="configuration file (default: ./footnav.toml if present)"
+    )
+    if profile:
+        p.add_argument(
+            "--profile",
+            metavar="NAME",
+            help=f"unit noise profile: {', '.join(sorted(PROFILES))} or [profiles.NAME]",
+        )
+
+
+def _add_output_args(p: argparse.ArgumentParser, *, capture: bool) -> None:
+    p.add_argument("--save", type=Path, metavar="FILE.rrd", help="also write the recording to this file")
+    p.add_argument("--no-viewer", action="store_true", help="do not open a viewer (save only)")
+    p.add_argument("--web", action="store_true", help="serve the web viewer on 127.0.0.1 and print its URL")
+    if capture:
+        p.add_argument("--sessions", type=Path, metavar="DIR", help="capture folder (default: ./sessions)")
+        p.add_argument("--no-capture", action="store_true", help="do not write a capture file")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from app.demo import PATHS
     from device.emulator.imu_errors import IMU_GRADES
-    from pipeline.profiles import PROFILES
 
     parser = argparse.ArgumentParser(
         prog="footnav", description="Foot-mounted inertial navigation, live in Rerun."
@@ -50,66 +81,190 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument(
         "--grade", choices=sorted(IMU_GRADES), default="mpu6500x4", help="emulated sensor grade"
     )
-    demo.add_argument("--save", type=Path, metavar="FILE.rrd", help="also write the recording to this file")
-    demo.add_argument("--no-viewer", action="store_true", help="do not open a viewer (save only)")
+    _add_output_args(demo, capture=True)
+    _add_config_args(demo)
+    demo.add_argument(
+        "--feet", type=int, choices=(1, 2), default=1, help="emulated shoes: 1, or 2 (left and right)"
+    )
     demo.add_argument(
         "--pace", type=_pace, default=1.0, metavar="1x|Nx|max", help="emulator speed (default real time)"
     )
     demo.add_argument("--seed", type=int, default=1, help="random seed of the emulated sensor errors")
 
-    live = sub.add_parser("live", help="navigate a connected unit (USB serial)")
-    live.add_argument("--port", required=True, help="serial port of the unit, e.g. /dev/ttyACM0")
-    live.add_argument("--profile", choices=sorted(PROFILES), default="mpu6500x4", help="unit noise profile")
+    live = sub.add_parser(
+        "live", help="navigate one connected unit, or two (--left/--right), over USB serial"
+    )
+    live.add_argument("--port", help="serial port of the unit, e.g. /dev/ttyACM0")
+    live.add_argument("--left", metavar="PORT", help="serial port of the left-foot unit")
+    live.add_argument("--right", metavar="PORT", help="serial port of the right-foot unit")
+    _add_config_args(live)
     live.add_argument(
         "--rate-divider",
         type=int,
-        default=0,
+        default=None,
         choices=range(7),
         metavar="K",
         help="output every 2**K samples of the 1 kHz base rate (default 0: 1 kHz)",
     )
-    live.add_argument("--save", type=Path, metavar="FILE.rrd", help="also write the recording to this file")
-    live.add_argument("--no-viewer", action="store_true", help="do not open a viewer (save only)")
+    _add_output_args(live, capture=True)
+
+    replay = sub.add_parser("replay", help="replay a footnav capture (.mcap) through the same pipeline")
+    replay.add_argument("file", type=Path, metavar="FILE", help="a capture written by footnav live/demo")
+    replay.add_argument(
+        "--speed", type=_pace, default=math.inf, metavar="1x|Nx|max", help="replay pace (default max)"
+    )
+    replay.add_argument(
+        "--start", type=_seconds, default=0.0, metavar="S", help="start S seconds into the capture"
+    )
+    replay.add_argument(
+        "--end", type=_seconds, default=math.inf, metavar="S", help="stop S seconds into the capture"
+    )
+    _add_config_args(replay)
+    _add_output_args(replay, capture=False)
+
+    export = sub.add_parser("export", help="navigate a recording and write one CSV row per sample")
+    export.add_argument(
+        "input", type=Path, metavar="INPUT", help="a PyShoe .mat, x-io CSV, OpenShoe log or CSV"
+    )
+    export.add_argument(
+        "-o", "--output", type=Path, required=True, metavar="TRACK.csv", help="where to write"
+    )
+    _add_recording_args(export)
+
+    evaluate = sub.add_parser("evaluate", help="accuracy on recordings with ground truth or a closed loop")
+    evaluate.add_argument(
+        "paths", type=Path, nargs="+", metavar="PATH", help="recordings, or folders of them"
+    )
+    evaluate.add_argument("--smooth", action="store_true", help="evaluate the smoothed (non-causal) solution")
+
+    config = sub.add_parser("config", help="show the effective configuration and where each value came from")
+    _add_config_args(config)
+    config.add_argument("--rate-divider", type=int, default=None, choices=range(7), metavar="K")
+    config.add_argument("--sessions", type=Path, metavar="DIR", help="capture folder")
+    config.add_argument("--no-capture", action="store_true", help="as the live option")
     return parser
 
 
-def _live(args: argparse.Namespace) -> int:
-    from app.session import SerialSessionResult, run_serial_session
-    from app.status import StatusLine
-    from pipeline.navigator import NavConfig, Navigator
-    from pipeline.profiles import get_profile
-    from views.logger import RerunLogger
-    from views.sinks import choose_sinks
+def _add_recording_args(parser: argparse.ArgumentParser) -> None:
+    from pipeline.loaders import LOADERS
+    from pipeline.profiles import PROFILES
 
-    rate_hz = 1000.0 / 2**args.rate_divider
-    sinks, note = choose_sinks(args.save, want_viewer=not args.no_viewer)
-    print(note, file=sys.stderr)
-    logger = RerunLogger(sinks, recording_id=f"live-{uuid.uuid4().hex[:12]}") if sinks else None
-    navigator = Navigator(NavConfig(profile=get_profile(args.profile)), rate_hz=rate_hz)
-    status = StatusLine()
-    result = SerialSessionResult()
-    try:
-        asyncio.run(
-            run_serial_session(
-                args.port,
-                navigator,
-                [status] if logger is None else [logger.put, status],
-                rate_divider_log2=args.rate_divider,
-                status=status,
-                result=result,
-            )
+    parser.add_argument(
+        "--format", choices=sorted(LOADERS), help="recording format (default: detected from the file)"
+    )
+    parser.add_argument(
+        "--columns",
+        metavar="SPEC",
+        help="for a generic CSV: time=COL[:s|ms|us|ns],acc=X;Y;Z[:m/s2|g|mg],gyr=X;Y;Z[:rad/s|deg/s],profile=NAME",
+    )
+    parser.add_argument(
+        "--profile", choices=sorted(PROFILES), help="unit profile (default: the format's sensor)"
+    )
+    parser.add_argument(
+        "--smooth", action="store_true", help="smoothed (non-causal) solution instead of the live one"
+    )
+
+
+def _export(args: argparse.Namespace) -> int:
+    from app.export import run_export
+
+    print(
+        run_export(
+            args.input,
+            args.output,
+            fmt=args.format,
+            columns=args.columns,
+            profile=args.profile,
+            smooth=args.smooth,
         )
-    except KeyboardInterrupt:
-        print("\nstopped: the unit was told to stop and the recording was closed", file=sys.stderr)
-    finally:
-        status.finish()
-        if logger is not None:
-            logger.close()
+    )
+    return 0
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from app.evaluate import format_table, run_evaluate
+
+    rows, problems = run_evaluate(args.paths, smooth=args.smooth)
+    print(format_table(rows))
+    for problem in problems:
+        print(f"footnav: skipped: {problem}", file=sys.stderr)
+    return 0 if rows else 2
+
+
+def _config(args: argparse.Namespace) -> Config:
+    """Defaults < the configuration file < the command line."""
+    from app.config import CLI, load_config
+
+    cfg = load_config(args.config)
+    cfg.set("unit.profile", getattr(args, "profile", None), CLI)
+    cfg.set("unit.rate_divider", getattr(args, "rate_divider", None), CLI)
+    cfg.set("session.sessions_dir", str(args.sessions) if getattr(args, "sessions", None) else None, CLI)
+    if getattr(args, "no_capture", False):
+        cfg.set("session.capture", False, CLI)
+    cfg.profile()  # an unknown profile name is an error now, not mid-session
+    return cfg
+
+
+def _live(args: argparse.Namespace, argv: list[str]) -> int:
+    from app.live import LiveOptions, run_live
+
+    if args.port and (args.left or args.right):
+        raise FootnavError("give either --port (one unit) or --left/--right (two units), not both")
+    if args.port:
+        ports = {"foot": args.port}
+    elif args.left and args.right:
+        ports = {"left": args.left, "right": args.right}
+    elif args.left or args.right:
+        ports = {"left": args.left} if args.left else {"right": args.right}
+    else:
+        raise FootnavError("which unit? give --port PORT, or --left PORT --right PORT for two feet")
+    cfg = _config(args)
+    return run_live(
+        LiveOptions(
+            ports=ports,
+            config=cfg,
+            save=args.save,
+            viewer=not args.no_viewer,
+            web=args.web,
+            capture=bool(cfg["session.capture"]),
+            argv=("footnav", *argv),
+        )
+    )
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from app.replay import ReplayOptions, run_replay
+
+    if args.end <= args.start:
+        raise FootnavError(f"--end ({args.end:g} s) must come after --start ({args.start:g} s)")
+    cfg = _config(args)
+    return run_replay(
+        ReplayOptions(
+            path=args.file,
+            config=cfg,
+            speed=args.speed,
+            start_s=args.start,
+            end_s=args.end,
+            save=args.save,
+            viewer=not args.no_viewer,
+            web=args.web,
+            config_is_explicit=args.config is not None or args.profile is not None,
+        )
+    )
+
+
+def _show_config(args: argparse.Namespace) -> int:
+    cfg = _config(args)
+    where = f"file {cfg.file}" if cfg.file else "no configuration file (looked for ./footnav.toml)"
+    print(f"# effective footnav configuration; {where}")
+    for line in cfg.lines():
+        print(line)
     return 0
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``footnav`` console script."""
+    argv = sys.argv[1:] if argv is None else argv
     args = build_parser().parse_args(argv)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.WARNING, format="footnav: %(message)s"
@@ -118,6 +273,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "demo":
             from app.demo import DemoOptions, run_demo
 
+            cfg = _config(args)
             return run_demo(
                 DemoOptions(
                     path=args.path,
@@ -128,10 +284,22 @@ def main(argv: list[str] | None = None) -> int:
                     viewer=not args.no_viewer,
                     realtime=args.pace,
                     seed=args.seed,
+                    feet=args.feet,
+                    web=args.web,
+                    capture=bool(cfg["session.capture"]),
+                    config=cfg,
                 )
             )
         if args.command == "live":
-            return _live(args)
+            return _live(args, argv)
+        if args.command == "replay":
+            return _replay(args)
+        if args.command == "config":
+            return _show_config(args)
+        if args.command == "export":
+            return _export(args)
+        if args.command == "evaluate":
+            return _evaluate(args)
     except FootnavError as exc:
         print(f"footnav: error: {exc}", file=sys.stderr)
         return 2

@@ -7,24 +7,37 @@ the distance walked and the final position error against the emulator's ground t
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import sys
-import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
+from app.config import DEFAULT, Config, defaults
+from app.live import (
+    FOOT_START_OFFSET_M,
+    FootRun,
+    finish_capture,
+    foot_sinks,
+    new_session_id,
+    notice,
+    open_capture,
+    run_feet,
+    unit_header,
+)
 from app.session import SerialSessionResult, run_serial_session
 from app.status import StatusLine
 from device.emulator.gait import GaitTruth, simulate_walk
 from device.emulator.imu_errors import IMU_GRADES, corrupt
 from device.emulator.pty_server import PtyShoeServer
-from pipeline.navigator import NavConfig, Navigator
-from pipeline.profiles import get_profile
+from device.unit import OpenShoeUnit
+from pipeline.navigator import Navigator
 from pipeline.runner import NavSink
-from views.logger import RerunLogger
-from views.sinks import choose_sinks
+from views.outputs import open_session_views
 
 PATHS = ("rectangle", "line", "figure8", "stairs")
 # the profile the filter assumes for each emulated sensor grade
@@ -49,6 +62,14 @@ class DemoOptions:
     viewer: bool = True
     realtime: float = 1.0  # emulator pace: 1 = real time, math.inf = as fast as possible
     seed: int = 1
+    feet: int = 1
+    """1: one emulated shoe (``foot``); 2: ``left`` and ``right``, the same walk side by side."""
+    web: bool = False
+    capture: bool = True
+    config: Config | None = None
+    """Sessions folder, filter and detector settings (default: built-in; the profile follows the grade)."""
+    collect: Callable[[str], NavSink] | None = None
+    """Tests: an extra NavSink per foot (given the foot name)."""
 
 
 @dataclass(frozen=True)
@@ -85,59 +106,106 @@ def summarise(truth: GaitTruth, result: SerialSessionResult, samples_navigated: 
     return DemoSummary(truth.distance_m, error, truth.t_s.size, samples_navigated, result.link.lost_packets)
 
 
+def demo_truth(opts: DemoOptions, foot_index: int) -> tuple[GaitTruth, NDArray[np.float64], NDArray[np.float64]]:
+    """Ground truth and corrupted IMU signals of one emulated foot (the second foot: same walk, own
+    sensor errors)."""
+    truth = simulate_walk(opts.path, opts.duration_s, rate_hz=1000.0, speed_mps=opts.speed_mps, seed=opts.seed)
+    acc, gyr, _ = corrupt(
+        truth.acc_b_mps2, truth.gyr_b_radps, truth.rate_hz, IMU_GRADES[opts.grade], seed=opts.seed + foot_index
+    )
+    return truth, acc, gyr
+
+
 def run_demo(opts: DemoOptions) -> int:
     """Run the demo; returns the process exit code."""
     if opts.path not in PATHS:
         raise ValueError(f"unknown path {opts.path!r}; choose one of {', '.join(PATHS)}")
-    truth = simulate_walk(
-        opts.path, opts.duration_s, rate_hz=1000.0, speed_mps=opts.speed_mps, seed=opts.seed
-    )
-    acc, gyr, _ = corrupt(
-        truth.acc_b_mps2, truth.gyr_b_radps, truth.rate_hz, IMU_GRADES[opts.grade], seed=opts.seed
-    )
+    if opts.feet not in (1, 2):
+        raise ValueError(f"the demo emulates 1 or 2 feet, not {opts.feet}")
+    feet = ("foot",) if opts.feet == 1 else ("left", "right")
+    truths = [demo_truth(opts, k) for k in range(len(feet))]
+    truth = truths[0][0]
     print(
-        f"footnav demo: emulated shoe ({opts.grade}), {opts.path} walk, {opts.duration_s:.0f} s at "
-        f"{opts.speed_mps:.1f} m/s, 1 kHz over a pseudo-terminal",
+        f"footnav demo: {len(feet)} emulated shoe(s) ({opts.grade}), {opts.path} walk, "
+        f"{opts.duration_s:.0f} s at {opts.speed_mps:.1f} m/s, 1 kHz over a pseudo-terminal",
         file=sys.stderr,
     )
-    sinks, note = choose_sinks(opts.save, want_viewer=opts.viewer)
-    print(note, file=sys.stderr)
-    logger = RerunLogger(sinks, recording_id=f"demo-{uuid.uuid4().hex[:12]}") if sinks else None
-    if logger is not None:
-        logger.log_truth(truth.pos_n_m, t_s=truth.t_s)
-        logger.log_event(f"demo: {opts.path}, {opts.duration_s:.0f} s, grade {opts.grade}", t_s=0.0)
-    config = NavConfig(profile=get_profile(PROFILE_OF_GRADE[opts.grade]))
-    navigator = Navigator(config, rate_hz=truth.rate_hz)
-    status = StatusLine()
-    sinks_nav: list[NavSink] = [status] if logger is None else [logger.put, status]
-    server = PtyShoeServer(truth.t_s, acc, gyr, speed=opts.realtime, record=False)
+    cfg = opts.config if opts.config is not None else defaults()
+    if opts.config is None or cfg.source("unit.profile") == DEFAULT:
+        cfg.set("unit.profile", PROFILE_OF_GRADE[opts.grade], f"demo (grade {opts.grade})")
+    session_id = new_session_id("demo")
+    views, notes = open_session_views(
+        save=opts.save, want_viewer=opts.viewer, web=opts.web, feet=feet, recording_id=session_id, notice=notice
+    )
+    for note in notes:
+        print(note, file=sys.stderr)
+    two = len(feet) > 1
+    if views is not None:
+        for foot, (t, _, _) in zip(feet, truths, strict=True):
+            offset = np.asarray(FOOT_START_OFFSET_M[foot]) if two else np.zeros(3)
+            views.log_truth(t.pos_n_m + offset, t_s=t.t_s, foot=foot)
+        views.log_event(
+            f"demo: {opts.path}, {opts.duration_s:.0f} s, grade {opts.grade}, feet {', '.join(feet)}", t_s=0.0
+        )
+    servers = [PtyShoeServer(t.t_s, acc, gyr, speed=opts.realtime, record=False) for t, acc, gyr in truths]
+    extra = {"command": "footnav demo", "emulator": f"{opts.path} {opts.grade}"}
+    capture = open_capture(cfg, session_id, enabled=opts.capture, extra=extra)
+    status = StatusLine(feet=feet)
+    nav_config = cfg.nav_config()
+    runs = [
+        FootRun(foot, server.port, Navigator(nav_config, rate_hz=truth.rate_hz))
+        for foot, server in zip(feet, servers, strict=True)
+    ]
+    for run in runs:
+        foot_sinks(run, views, status, two_feet=two)
+        if opts.collect is not None:
+            run.sinks.append(opts.collect(run.foot))
+        if capture is not None:
+            run.tap = capture.add_unit(unit_header(run.foot, run.port, "pty (emulator)", cfg, 0))
+    server_of = dict(zip(feet, servers, strict=True))
+
+    async def session(run: FootRun) -> None:
+        def opened(unit: OpenShoeUnit) -> None:
+            if run.health is not None:
+                run.health.stats = lambda: unit.stats
+
+        server = server_of[run.foot]
+        await run_serial_session(
+            server.port,
+            run.navigator,
+            run.sinks,
+            expect_samples=truth.t_s.size,
+            source_done=server.finished.is_set,
+            status=status.foot(run.foot),
+            result=run.result,
+            capture=run.tap,
+            on_open=opened,
+        )
+
     interrupted = False
-    result = SerialSessionResult()
     try:
-        with server:
-            asyncio.run(
-                run_serial_session(
-                    server.port,
-                    navigator,
-                    sinks_nav,
-                    expect_samples=truth.t_s.size,
-                    source_done=server.finished.is_set,
-                    status=status,
-                    result=result,
-                )
-            )
+        with contextlib.ExitStack() as stack:
+            for server in servers:
+                stack.enter_context(server)
+            asyncio.run(run_feet(runs, session))
     except KeyboardInterrupt:
         interrupted = True
     finally:
         status.finish()
-        if logger is not None:
-            logger.close()
+        finish_capture(capture, runs)
+        if views is not None:
+            for note in views.close():
+                notice(note)
     if interrupted:
         print("interrupted: stopped the unit and closed the recording", file=sys.stderr)
-    summary = summarise(truth, result, navigator.stats.samples_out)
-    if summary is None:
-        print("no navigation output (the unit never stood still long enough to align)", file=sys.stderr)
-        return 1
-    for line in summary.lines():
-        print(line)
-    return 0
+    code = 0
+    for run, (t, _, _) in zip(runs, truths, strict=True):
+        summary = summarise(t, run.result, run.navigator.stats.samples_out)
+        prefix = f"{run.foot}: " if two else ""
+        if summary is None:
+            print(f"{prefix}no navigation output (the unit never stood still long enough to align)", file=sys.stderr)
+            code = 1
+            continue
+        for line in summary.lines():
+            print(prefix + line)
+    return code

@@ -1,4 +1,4 @@
-"""Session assembly: a unit on a serial port -> the pipeline -> sinks, with a clean shutdown."""
+"""Session assembly: a unit (serial port or capture replay) -> the pipeline -> sinks, clean shutdown."""
 
 from __future__ import annotations
 
@@ -10,8 +10,10 @@ from collections.abc import AsyncGenerator, AsyncIterator, Callable, Sequence
 from dataclasses import dataclass
 from typing import cast
 
-from app.status import StatusLine
-from device.unit import LinkStats, OpenShoeUnit
+import numpy as np
+
+from app.status import FootStatus, StatusLine
+from device.unit import CaptureTap, LinkStats, OpenShoeUnit
 from pipeline.errors import DeviceError
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import Navigator
@@ -21,6 +23,8 @@ from pipeline.samples import ImuBatch
 log = logging.getLogger(__name__)
 
 IDLE_NOTICE_S = 1.0  # a unit that stops streaming is noticed within this long
+LINK_HEALTH_PERIOD_S = 0.5
+"""Link health (rate, loss, reconnects) is logged every this much device time."""
 
 
 @dataclass
@@ -32,6 +36,46 @@ class SerialSessionResult:
     last_nav: NavBatch | None = None
     device_t0_s: float | None = None
     unit_stopped_cleanly: bool = False
+    samples_received: int = 0
+    """Samples handed to the pipeline (a replay of the capture stops after as many)."""
+
+
+class LinkHealth:
+    """A NavSink that logs link health every :data:`LINK_HEALTH_PERIOD_S` of device time: samples per
+    second of host receive time, cumulative lost packets and reconnects.
+
+    Host times come from the batches (in a replay, the captured ones), so replays log the same values.
+    """
+
+    def __init__(self, log: Callable[..., None], foot: str, stats: Callable[[], LinkStats] | None = None) -> None:
+        self._log = log
+        self.foot = foot
+        self.stats = stats
+        self._t_next: float | None = None
+        self._n = 0
+        self._host0: int | None = None
+
+    def __call__(self, nav: NavBatch) -> None:
+        if self._host0 is None:
+            self._host0 = int(nav.host_ns[0])
+            self._t_next = float(nav.t_s[0]) + LINK_HEALTH_PERIOD_S
+        self._n += len(nav)
+        t_last = float(nav.t_s[-1])
+        assert self._t_next is not None
+        if t_last < self._t_next:
+            return
+        host1 = int(nav.host_ns[-1])
+        span_s = (host1 - self._host0) / 1e9
+        stats = self.stats() if self.stats is not None else None
+        self._log(
+            foot=self.foot,
+            t_s=t_last,
+            rate_hz=self._n / span_s if span_s > 0 else float("nan"),
+            lost_packets=0 if stats is None else stats.lost_packets,
+            reconnects=int(getattr(stats, "reconnects", 0)),
+        )
+        self._n, self._host0 = 0, host1
+        self._t_next = t_last + LINK_HEALTH_PERIOD_S
 
 
 async def _session_samples(
@@ -40,27 +84,68 @@ async def _session_samples(
     expect_samples: int | None,
     source_done: Callable[[], bool],
     on_idle: Callable[[float], None],
+    host_clock: Callable[[int], int] | None = None,
+    idle_notice_s: float | None = IDLE_NOTICE_S,
+    window: tuple[float, float] | None = None,
+    on_window: Callable[[], None] | None = None,
 ) -> AsyncIterator[ImuBatch]:
     """The unit's batches with time rebased to the session's first sample; ends after
-    ``expect_samples`` or when ``source_done()`` and the link has gone quiet."""
+    ``expect_samples`` or when ``source_done()`` and the link has gone quiet.
+
+    ``host_clock`` maps the driver's host stamp of a batch to another (a replay's captured time).
+    ``window = (start, end)`` in session seconds: whole batches before ``start`` are decoded but not
+    passed on (``on_window()`` is called at the first one passed on), the stream ends after ``end``."""
+    in_window = window is None
     received = 0
     batches = cast(AsyncGenerator[ImuBatch, None], unit.imu_batches())
+    # The pending anext survives idle timeouts: cancelling it (asyncio.wait_for) would end the generator.
+    pending: asyncio.Future[ImuBatch] | None = None
     async with contextlib.aclosing(batches):
-        while expect_samples is None or received < expect_samples:
-            try:
-                batch = await asyncio.wait_for(anext(batches), IDLE_NOTICE_S)
-            except StopAsyncIteration:
-                return
-            except TimeoutError:
-                if source_done():
-                    return
-                on_idle(IDLE_NOTICE_S)
-                continue
-            if result.device_t0_s is None:
-                result.device_t0_s = float(batch.t_s[0])
-                result.first_counter = int(batch.counter[0])
-            received += len(batch)
-            yield dataclasses.replace(batch, t_s=batch.t_s - result.device_t0_s)
+        try:
+            while expect_samples is None or received < expect_samples:
+                if idle_notice_s is None:  # a replay: never idle, and no task per batch
+                    try:
+                        batch = await anext(batches)
+                    except StopAsyncIteration:
+                        return
+                else:
+                    if pending is None:
+                        pending = asyncio.ensure_future(anext(batches))
+                    done, _ = await asyncio.wait({pending}, timeout=idle_notice_s)
+                    if not done:
+                        if source_done():
+                            return
+                        on_idle(idle_notice_s)
+                        continue
+                    fut, pending = pending, None
+                    try:
+                        batch = fut.result()
+                    except StopAsyncIteration:
+                        return
+                if host_clock is not None:
+                    host = host_clock(int(batch.host_ns[0]))
+                    batch = dataclasses.replace(batch, host_ns=np.full(len(batch), host, dtype=np.int64))
+                if result.device_t0_s is None:
+                    result.device_t0_s = float(batch.t_s[0])
+                    result.first_counter = int(batch.counter[0])
+                if window is not None:
+                    t_first = float(batch.t_s[0]) - result.device_t0_s
+                    if t_first > window[1]:
+                        return
+                    if not in_window:
+                        if float(batch.t_s[-1]) - result.device_t0_s < window[0]:
+                            continue
+                        in_window = True
+                        if on_window is not None:
+                            on_window()
+                received += len(batch)
+                result.samples_received = received
+                yield dataclasses.replace(batch, t_s=batch.t_s - result.device_t0_s)
+        finally:
+            if pending is not None and not pending.done():
+                pending.cancel()
+                with contextlib.suppress(asyncio.CancelledError, StopAsyncIteration):
+                    await pending
 
 
 async def run_serial_session(
@@ -72,36 +157,88 @@ async def run_serial_session(
     expect_samples: int | None = None,
     source_done: Callable[[], bool] = lambda: False,
     on_idle: Callable[[float], None] | None = None,
-    status: StatusLine | None = None,
+    status: StatusLine | FootStatus | None = None,
     result: SerialSessionResult | None = None,
+    capture: CaptureTap | None = None,
+    on_open: Callable[[OpenShoeUnit], None] | None = None,
 ) -> SerialSessionResult:
     """Open ``port``, start the unit's IMU stream, navigate until the stream ends or the task is
     cancelled (Ctrl-C), then stop the unit and close the port whatever happened.
 
     ``result`` (optional) is filled in as the session goes, so an interrupted session still has one.
+    ``capture`` sees every byte read and written (the capture file); ``on_open`` is called with the
+    unit once the port is open.
 
     Raises:
         DeviceError: the port cannot be opened, the unit does not answer, or it was unplugged.
     """
+    unit = await OpenShoeUnit.open_serial(port, capture=capture)
+    if on_open is not None:
+        on_open(unit)
+    return await run_unit_session(
+        unit,
+        navigator,
+        sinks,
+        rate_divider_log2=rate_divider_log2,
+        expect_samples=expect_samples,
+        source_done=source_done,
+        on_idle=on_idle,
+        status=status,
+        result=result,
+    )
+
+
+async def run_unit_session(
+    unit: OpenShoeUnit,
+    navigator: Navigator,
+    sinks: Sequence[NavSink],
+    *,
+    start: bool = True,
+    rate_divider_log2: int = 0,
+    expect_samples: int | None = None,
+    source_done: Callable[[], bool] = lambda: False,
+    on_idle: Callable[[float], None] | None = None,
+    status: StatusLine | FootStatus | None = None,
+    result: SerialSessionResult | None = None,
+    host_clock: Callable[[int], int] | None = None,
+    idle_notice_s: float | None = IDLE_NOTICE_S,
+    window: tuple[float, float] | None = None,
+    on_window: Callable[[], None] | None = None,
+) -> SerialSessionResult:
+    """Navigate an open unit's stream (see :func:`run_serial_session`); ``start=False`` for a replay,
+    where the captured bytes already hold the start and no stop is sent; ``idle_notice_s=None`` never
+    treats a pause as idle (replays); ``window``: see ``_session_samples``. Closes the unit."""
     result = result if result is not None else SerialSessionResult()
+    name = unit.link.name
 
     def keep_last(nav: NavBatch) -> None:
         result.last_nav = nav
 
     def idle(seconds: float) -> None:
-        log.warning("no data from %s for %.1f s", port, seconds)
+        log.warning("no data from %s for %.1f s", name, seconds)
 
-    unit = await OpenShoeUnit.open_serial(port)
     if status is not None:
         status.lost_packets = lambda: unit.stats.lost_packets
     try:
-        await unit.start_imu_stream(rate_divider_log2)
-        samples = _session_samples(unit, result, expect_samples, source_done, on_idle or idle)
+        if start:
+            await unit.start_imu_stream(rate_divider_log2)
+        samples = _session_samples(
+            unit,
+            result,
+            expect_samples,
+            source_done,
+            on_idle or idle,
+            host_clock,
+            idle_notice_s,
+            window,
+            on_window,
+        )
         await run_pipeline(samples, navigator, [*sinks, keep_last])
     finally:
         result.link = unit.stats
-        with contextlib.suppress(DeviceError, OSError):
-            result.unit_stopped_cleanly = await asyncio.shield(unit.stop())
+        if start:
+            with contextlib.suppress(DeviceError, OSError):
+                result.unit_stopped_cleanly = await asyncio.shield(unit.stop())
         with contextlib.suppress(DeviceError, OSError):
             await asyncio.shield(unit.close())
     return result

@@ -153,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     dt = np.diff(t, prepend=t[0] - 1.0 / RATE_HZ)
 
     def filter_run(m: int) -> tuple[np.ndarray, ...]:
-        pos, vel, quat, cov = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 4)), np.empty((m, 3, 3))
+        pos, vel, quat, cov = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 4)), np.empty((m, 4, 4))
         x, P = x0.copy(), P0.copy()
         eskf.run_filter(
             x, P, acc[:m], gyr[:m], dt[:m], stance[:m], par, pos, vel, quat, cov, np.zeros(eskf.N_CNT, dtype=np.int64)

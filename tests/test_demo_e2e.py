@@ -36,7 +36,9 @@ def _column(tbl: pa.Table, name: str) -> np.ndarray:
 @pytest.fixture(scope="module")
 def demo_rrd(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
     path = tmp_path_factory.mktemp("demo") / "demo.rrd"
-    proc = _run_demo("--path", "rectangle", "--duration", "60", "--save", str(path), "--pace", "max")
+    proc = _run_demo(
+        "--path", "rectangle", "--duration", "60", "--save", str(path), "--pace", "max", "--sessions", str(path.parent)
+    )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     return path, proc.stdout + proc.stderr
 
@@ -91,7 +93,7 @@ def test_realtime_pace_and_interrupt(tmp_path: Path) -> None:
     path = tmp_path / "cut.rrd"
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "app", "demo", "--duration", "30", "--save", str(path)],
+        [sys.executable, "-m", "app", "demo", "--duration", "30", "--save", str(path), "--sessions", str(tmp_path)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

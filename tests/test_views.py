@@ -378,3 +378,20 @@ def test_viewer_that_cannot_open_a_window_falls_back_to_a_file(tmp_path: Path) -
     sinks, desc = choose_sinks(tmp_path / "fallback.rrd", True, environ=env)
     assert [type(s) for s in sinks] == [rr.FileSink]
     assert "viewer not started" in desc and "fallback.rrd" in desc
+
+
+def test_step_onsets_floor_ellipses_and_heading() -> None:
+    stance = np.array([True, True, False, False, True, True, False, True])
+    np.testing.assert_array_equal(convert.step_onsets(stance, None), [4, 7])  # standing at the start is no step
+    np.testing.assert_array_equal(convert.step_onsets(stance, False), [0, 4, 7])
+    a = np.deg2rad(30.0)
+    rot = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    cov = rot @ np.diag([0.09, 0.04, 0.01]) @ rot.T
+    half, q = convert.floor_ellipses(cov[None], sigma_scale=3.0)
+    np.testing.assert_allclose(half[0, :2], [0.9, 0.6], rtol=1e-12)
+    assert half[0, 2] == convert.STEP_ELLIPSE_HALF_THICKNESS_M
+    r = quat_to_mat(q[0])
+    assert abs(abs(r[:, 0] @ rot[:, 0]) - 1.0) < 1e-12 and abs(r[2, 2] - 1.0) < 1e-12  # about z only
+    yaw = np.deg2rad([0.0, 90.0, -135.0])
+    q_wxyz = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], axis=1)
+    np.testing.assert_allclose(convert.heading_deg(q_wxyz), [0.0, 90.0, -135.0], atol=1e-12)

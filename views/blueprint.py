@@ -1,22 +1,27 @@
 """footnav's default Rerun blueprint (layout) and the static styling logged once per recording.
 
-Layout, sized for a laptop screen::
+Layout, sized for a laptop screen (1366×768 and up)::
 
-    ┌──────────────────────────────┬───────────────────────┐
-    │                              │ Foot clearance [m]    │
-    │  3D: foot track (trail up to │ Stance                │
-    │  the cursor), pose, k-sigma  │ [Position σ | Detector│
-    │  ellipsoid, ground truth     │  | Gait | Events]     │
-    └──────────────────────────────┴───────────────────────┘
+    ┌──────────────────────────────┬──────────────────────────────┐
+    │                              │ Foot clearance [m]           │
+    │  3D: per foot the track      │ [Speed | Heading | Stance]   │
+    │  (trail up to the cursor +   │ [Detector | Position σ]      │
+    │  decimated line), pose, step │ [Link rate | Link errors |   │
+    │  markers with floor ellipses,│  Gait | Events]              │
+    │  k-sigma ellipsoid, truth    │                              │
+    └──────────────────────────────┴──────────────────────────────┘
 
 The track is a per-sample Points3D entity drawn as a trail by a per-entity visible time range
-(−inf … cursor), so the growing track is never re-logged. Everything else in the 3D view is
-latest-at the cursor: one pose, one ellipsoid.
+(−inf … cursor), so the growing track is never re-logged at sample rate; the decimated line is
+re-logged at most twice a second. Step markers and their ellipses are trails too. Everything else in
+the 3D view is latest-at the cursor: one pose, one ellipsoid. Left and right always get the same
+colours (:data:`FOOT_COLORS`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import rerun as rr
 import rerun.blueprint as rrb
@@ -33,13 +38,15 @@ from views.paths import (
 )
 
 PLOT_WINDOW_S = 10.0
-"""Clearance and stance plots show this many seconds before the cursor."""
+"""Clearance, stance, speed and detector plots show this many seconds before the cursor."""
 
 TRACK_RADIUS_M = 0.004
 TRUTH_RADIUS_M = 0.003
 SHOE_HALF_SIZE_M = (0.13, 0.05, 0.035)
 """Half-size of the box drawn at the IMU pose (x forward along the shoe, z up in the body frame)."""
 AXES_LENGTH_M = 0.15
+STEP_RADIUS_M = 0.025
+LINE_RADIUS_M = 0.006
 
 SWING_RGB = (255, 140, 0)
 STANCE_RGB = (0, 160, 255)
@@ -57,6 +64,10 @@ FOOT_COLORS: dict[str, tuple[int, int, int]] = {
 def foot_color(foot: str) -> tuple[int, int, int]:
     """Series colour of a foot (a fixed palette; unknown names get the default colour)."""
     return FOOT_COLORS.get(foot, FOOT_COLORS["foot"])
+
+
+def _darker(rgb: tuple[int, int, int]) -> tuple[int, int, int]:
+    return (rgb[0] // 2, rgb[1] // 2, rgb[2] // 2)
 
 
 def _trail() -> rrb.VisibleTimeRanges:
@@ -81,7 +92,7 @@ def build_blueprint(
     """The default blueprint for a session with the given feet.
 
     Args:
-        feet: foot names (see :class:`views.paths.FootPaths`); the camera follows the first one.
+        feet: foot names (see :class:`views.paths.FootPaths`); the camera frames the whole scene.
         plot_window_s: width of the scrolling clearance/stance window, s.
     """
     paths = [FootPaths(f) for f in feet]
@@ -89,28 +100,40 @@ def build_blueprint(
     for p in paths:
         overrides[p.track] = [_trail(), rr.Points3D.from_fields(radii=TRACK_RADIUS_M, show_labels=False)]
         overrides[p.truth] = [_trail(), rr.Points3D.from_fields(radii=TRUTH_RADIUS_M, show_labels=False)]
+        overrides[p.steps] = [_trail(), rr.Points3D.from_fields(radii=STEP_RADIUS_M, show_labels=False)]
+        overrides[p.step_cov] = [_trail()]
     scene = rrb.Spatial3DView(
         name="Foot track",
         origin=f"/{WORLD}",
         overrides=overrides,  # type: ignore[arg-type]  # dict is invariant; values are VisualizerLike
-        eye_controls=rrb.EyeControls3D(eye_up=[0, 0, 1], tracking_entity=f"/{paths[0].pose}"),
+        # no tracking: the viewer frames the whole walk (following the pose put the camera on the shoe)
+        eye_controls=rrb.EyeControls3D(eye_up=[0, 0, 1]),
     )
     window = _window(plot_window_s)
+
+    def series(name: str, quantity: str, *, windowed: bool = True, **kw: Any) -> rrb.TimeSeriesView:
+        return rrb.TimeSeriesView(
+            name=name, origin=f"/{PLOTS}/{quantity}", time_ranges=window if windowed else None, **kw
+        )
+
     plots = rrb.Vertical(
-        rrb.TimeSeriesView(name="Foot clearance [m]", origin=f"/{PLOTS}/clearance", time_ranges=window),
-        rrb.TimeSeriesView(
-            name="Stance",
-            origin=f"/{PLOTS}/stance",
-            time_ranges=window,
-            axis_y=rrb.ScalarAxis(range=(-0.1, 1.1), zoom_lock=True),
+        series("Foot clearance [m]", "clearance"),
+        rrb.Tabs(
+            series("Speed [m/s]", "speed"),
+            series("Heading [°]", "heading", windowed=False),
+            series("Stance", "stance", axis_y=rrb.ScalarAxis(range=(-0.1, 1.1), zoom_lock=True)),
         ),
         rrb.Tabs(
-            rrb.TimeSeriesView(name="Position σ [m]", origin=f"/{PLOTS}/pos_sigma"),
-            rrb.TimeSeriesView(name="ZUPT detector", origin=f"/{PLOTS}/detector", time_ranges=window),
+            series("ZUPT detector (statistic, threshold)", "detector"),
+            series("Position σ [m]", "pos_sigma", windowed=False),
+        ),
+        rrb.Tabs(
+            series("Link: samples/s", "rate", windowed=False),
+            series("Link: lost packets, reconnects", "link_errors", windowed=False),
             rrb.StateTimelineView(name="Gait", origin=f"/{GAIT}"),
             rrb.TextLogView(name="Events", origin=f"/{EVENTS}"),
         ),
-        row_shares=[2, 1, 2],
+        row_shares=[3, 3, 3, 2],
     )
     return rrb.Blueprint(
         rrb.Horizontal(scene, plots, column_shares=[3, 2]),
@@ -144,6 +167,20 @@ def static_setup(feet: Sequence[str] = ("foot",)) -> list[tuple[str, rr.AsCompon
                 rr.Ellipsoids3D.from_fields(colors=[COV_RGBA], fill_mode="majorwireframe", line_radii=0.002),
             ),
             (p.truth, rr.Points3D.from_fields(colors=[TRUTH_RGB])),
+            (p.line, rr.LineStrips3D.from_fields(colors=[rgb], radii=LINE_RADIUS_M)),
+            (p.steps, rr.Points3D.from_fields(colors=[rgb])),
+            (p.step_cov, rr.Ellipsoids3D.from_fields(colors=[(*rgb, 70)], fill_mode="solid")),
+            (p.speed, rr.SeriesLines(names=f"{foot} speed", colors=[rgb], widths=1.5)),
+            (p.heading, rr.SeriesLines(names=f"{foot} heading", colors=[rgb], widths=1.5)),
+            (p.rate, rr.SeriesLines(names=f"{foot} samples/s", colors=[rgb], widths=1.5)),
+            (
+                p.link_errors,
+                rr.SeriesLines(
+                    names=[f"{foot} lost packets", f"{foot} reconnects"],
+                    colors=[rgb, (*_darker(rgb),)],
+                    widths=[1.5, 1.5],
+                ),
+            ),
             (p.clearance, rr.SeriesLines(names=f"{foot} clearance", colors=[rgb], widths=1.5)),
             (p.stance, rr.SeriesLines(names=f"{foot} stance", colors=[rgb], widths=1.5)),
             (

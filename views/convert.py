@@ -215,7 +215,8 @@ def floor_ellipses(cov: F64, *, sigma_scale: float = DEFAULT_SIGMA_SCALE) -> tup
     """
     p = np.asarray(cov, dtype=np.float64)[:, :2, :2]
     p = 0.5 * (p + np.swapaxes(p, -1, -2))
-    p = np.where(np.isfinite(p).all(axis=(-1, -2))[:, None, None], p, 0.0)
+    finite: NDArray[np.bool_] = np.asarray(np.isfinite(p).all(axis=(-1, -2)))
+    p = np.where(finite[:, None, None], p, 0.0)
     evals, evecs = np.linalg.eigh(p)  # ascending: column 1 is the major axis
     angle = np.arctan2(evecs[:, 1, 1], evecs[:, 0, 1])
     half = np.empty((p.shape[0], 3))

@@ -42,6 +42,15 @@ DEFAULT_MAX_QUEUED_SAMPLES = 120_000
 DEFAULT_ELLIPSOID_EVERY = 10
 """Ellipsoid decimation: 100 Hz at 1 kHz, visually the same, ~25 % smaller files than every sample."""
 CLOSE_TIMEOUT_S = 10.0
+DEFAULT_SERIES_EVERY = 10
+"""Speed and heading are plotted at 100 Hz of a 1 kHz stream (every 10th sample)."""
+LINE_PERIOD_S = 0.5
+"""The decimated track line is re-logged at most this often, in device time and in wall time (≤ 2 Hz)."""
+LINE_POINT_SPACING_S = 0.1
+"""The line keeps one point per this much device time to start with ..."""
+LINE_MAX_POINTS = 500
+"""... and halves its points (doubling the spacing) whenever it holds more than this, so each
+re-log costs at most ~6 kB however long the session runs."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,6 +71,40 @@ class _Truth:
 class _Nav:
     foot: str
     nav: NavBatch
+
+
+@dataclass(frozen=True, slots=True)
+class _Link:
+    foot: str
+    t_s: float
+    rate_hz: float
+    lost_packets: int
+    reconnects: int
+
+
+@dataclass(slots=True)
+class _Line:
+    """Decimated track of one foot (kept on the logger thread)."""
+
+    points: list[tuple[float, float, float]]
+    spacing_s: float = LINE_POINT_SPACING_S
+    next_t_s: float = -np.inf
+    logged_t_s: float = -np.inf
+    logged_wall: float = -np.inf
+    last_t_s: float = -np.inf
+    dirty: bool = False
+
+    def add(self, t_s: NDArray[np.float64], pos: NDArray[np.float32]) -> None:
+        for k in range(t_s.shape[0]):
+            if t_s[k] >= self.next_t_s:
+                self.points.append((float(pos[k, 0]), float(pos[k, 1]), float(pos[k, 2])))
+                self.next_t_s = float(t_s[k]) + self.spacing_s
+                self.dirty = True
+        if t_s.shape[0]:
+            self.last_t_s = float(t_s[-1])
+        if len(self.points) > LINE_MAX_POINTS:
+            self.points = self.points[::2]
+            self.spacing_s *= 2.0
 
 
 _STOP = object()
@@ -101,6 +144,7 @@ class RerunLogger:
         feet: foot names that will be logged (sets up blueprint and static styling).
         sigma_scale: covariance ellipsoids are drawn at this many σ.
         ellipsoid_every: log the ellipsoid every n-th sample (1 = every sample, 0 = never).
+        series_every: log speed and heading every n-th sample.
         max_queued_samples: queue budget; beyond it ``put`` drops (see module docstring).
         flush_period_s: batching period of the thread.
 
@@ -116,6 +160,7 @@ class RerunLogger:
         feet: Sequence[str] = (DEFAULT_FOOT,),
         sigma_scale: float = convert.DEFAULT_SIGMA_SCALE,
         ellipsoid_every: int = DEFAULT_ELLIPSOID_EVERY,
+        series_every: int = DEFAULT_SERIES_EVERY,
         max_queued_samples: int = DEFAULT_MAX_QUEUED_SAMPLES,
         flush_period_s: float = FLUSH_PERIOD_S,
     ) -> None:
@@ -127,6 +172,7 @@ class RerunLogger:
         self._sinks = tuple(sinks)
         self._sigma_scale = sigma_scale
         self._ellipsoid_every = ellipsoid_every
+        self._series_every = series_every
         self._max_queued = max_queued_samples
         self._flush_period_s = flush_period_s
         self.stats = LoggerStats()
@@ -143,6 +189,8 @@ class RerunLogger:
         self._last_stance: dict[str, bool | None] = dict.fromkeys(self.feet)
         self._foot_samples: dict[str, int] = dict.fromkeys(self.feet, 0)
         self._floor_logged = False
+        self._lines: dict[str, _Line] = {f: _Line([]) for f in self.feet}
+        self._steps: dict[str, int] = dict.fromkeys(self.feet, 0)
         self._thread = threading.Thread(target=self._run, name="footnav-rerun", daemon=True)
         self._thread.start()
 
@@ -192,6 +240,21 @@ class RerunLogger:
         if not self._closed:
             self._queue.put(_Truth(foot, np.asarray(t_s, np.float64), np.asarray(pos_n_m, np.float64)))
 
+    def log_link(
+        self, *, foot: str = DEFAULT_FOOT, t_s: float, rate_hz: float, lost_packets: int, reconnects: int = 0
+    ) -> None:
+        """Log link health at device time ``t_s``: sample rate (Hz of host time), cumulative lost
+        packets and reconnects. Never blocks."""
+        if foot not in self._paths:
+            raise ValueError(f"foot {foot!r} was not declared; this logger has feet={self.feet}")
+        if not self._closed:
+            self._queue.put(_Link(foot, t_s, rate_hz, lost_packets, reconnects))
+
+    @property
+    def steps(self) -> dict[str, int]:
+        """Steps logged per foot so far."""
+        return dict(self._steps)
+
     def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> bool:
         """Log what is queued, flush, disconnect the sinks (file footers written), join the thread.
 
@@ -232,6 +295,7 @@ class RerunLogger:
             return
         pending: dict[str, list[NavBatch]] = {f: [] for f in self.feet}
         events: list[_Event] = []
+        links: list[_Link] = []
         n_pending = 0
         deadline: float | None = None
         while True:
@@ -245,6 +309,10 @@ class RerunLogger:
                 n_pending += len(item.nav)
             elif isinstance(item, _Event):
                 events.append(item)
+            elif isinstance(item, _Link):
+                links.append(item)
+                if len(links) >= 64:
+                    self._guarded(self._send_links, links)
             elif isinstance(item, _Truth):
                 self._flush(pending, events)  # keep the order: truth after earlier nav
                 n_pending, deadline = 0, None
@@ -255,9 +323,12 @@ class RerunLogger:
                 deadline = time.monotonic() + self._flush_period_s
             if stop or item is None or n_pending >= MAX_ROWS_PER_SEND or (n_pending and self._waiting):
                 self._flush(pending, events)
+                if links:
+                    self._guarded(self._send_links, links)
                 n_pending, deadline = 0, None
             if stop:
                 break
+        self._guarded(self._send_lines, True)
         self._guarded(self._finish)
 
     def _discard_until_stop(self) -> None:
@@ -300,6 +371,8 @@ class RerunLogger:
             self._guarded(self._send_events, events)
             events.clear()
         if n_done:
+            self._guarded(self._send_lines, False)
+        if n_done:
             self.stats.sends += 1
             self.stats.send_seconds += time.perf_counter() - start
 
@@ -315,10 +388,18 @@ class RerunLogger:
                     static=True,
                 )
                 self._floor_logged = True
-        for path, index, columns in convert.nav_columns(
-            arrays, paths, ellipsoid_every=self._ellipsoid_every, first_index=self._foot_samples[foot]
-        ):
+        first = self._foot_samples[foot]
+        columns_list = convert.nav_columns(
+            arrays, paths, ellipsoid_every=self._ellipsoid_every, first_index=first, series_every=self._series_every
+        )
+        onsets = convert.step_onsets(nav.stance, self._last_stance[foot])
+        columns_list += convert.step_columns(
+            arrays, nav.pos_cov_n_m2, onsets, paths, sigma_scale=self._sigma_scale
+        )
+        for path, index, columns in columns_list:
             rec.send_columns(path, indexes=[index], columns=columns)
+        self._steps[foot] += int(onsets.size)
+        self._lines[foot].add(arrays.t_s, arrays.pos)
         self._foot_samples[foot] += len(nav)
         gait = convert.gait_columns(arrays.t_s, nav.stance, paths, previous=self._last_stance[foot])
         if gait is not None:
@@ -334,6 +415,38 @@ class RerunLogger:
             indexes=[convert.time_column(t)],
             columns=rr.TextLog.columns(text=[e.text for e in events], level=[e.level for e in events]),
         )
+
+    def _send_links(self, links: list[_Link]) -> None:
+        by_foot: dict[str, list[_Link]] = {}
+        for item in links:
+            by_foot.setdefault(item.foot, []).append(item)
+        links.clear()
+        for foot, items in by_foot.items():
+            paths = self._paths[foot]
+            index = convert.time_column(np.array([i.t_s for i in items], dtype=np.float64))
+            self.recording.send_columns(
+                paths.rate, indexes=[index], columns=rr.Scalars.columns(scalars=[i.rate_hz for i in items])
+            )
+            errors = np.array([[i.lost_packets, i.reconnects] for i in items], dtype=np.float64)
+            self.recording.send_columns(
+                paths.link_errors, indexes=[index], columns=rr.Scalars.columns(scalars=errors)
+            )
+
+    def _send_lines(self, final: bool) -> None:
+        """Re-log each foot's decimated track line if it grew and ≥ LINE_PERIOD_S passed (device and wall)."""
+        now = time.monotonic()
+        for foot, line in self._lines.items():
+            if not line.dirty or len(line.points) < 2:
+                continue
+            t = line.last_t_s
+            if not final and (t - line.logged_t_s < LINE_PERIOD_S or now - line.logged_wall < LINE_PERIOD_S):
+                continue
+            self.recording.send_columns(
+                self._paths[foot].line,
+                indexes=[convert.time_column(np.array([t]))],
+                columns=rr.LineStrips3D.columns(strips=[np.asarray(line.points, dtype=np.float32)]),
+            )
+            line.logged_t_s, line.logged_wall, line.dirty = t, now, False
 
     def _send_truth(self, truth: _Truth) -> None:
         self.recording.send_columns(

@@ -8,8 +8,13 @@ so two feet become siblings under ``world/`` and in each plot:
 - ``world/<foot>/pose/shoe``  static Boxes3D drawn in the IMU frame (inherits the pose);
 - ``world/<foot>/cov``    Ellipsoids3D, k-sigma position covariance in the navigation frame
   (sibling of ``pose``, positioned with ``centers``: it must not inherit the foot rotation);
+- ``world/<foot>/line``   LineStrips3D, the decimated track, re-logged at most twice a second;
+- ``world/<foot>/steps``  Points3D, one marker per step (stance onset), shown as a trail;
+- ``world/<foot>/step_cov``  Ellipsoids3D, flat k-sigma ellipse of the horizontal position
+  covariance at each step, on the floor under the marker;
 - ``world/truth/<foot>``  optional ground-truth track;
-- ``plots/<quantity>/<foot>``  Scalars, so one time-series view per quantity shows both feet;
+- ``plots/<quantity>/<foot>``  Scalars, so one time-series view per quantity shows both feet
+  (stance, clearance, pos_sigma, detector, speed, heading; link health: rate, link_errors);
 - ``gait/<foot>``  StateChange lane (stance/swing transitions only).
 """
 
@@ -76,6 +81,21 @@ class FootPaths:
         return f"{self.root}/cov"
 
     @property
+    def line(self) -> str:
+        """Decimated track (LineStrips3D, re-logged at ≤ 2 Hz)."""
+        return f"{self.root}/line"
+
+    @property
+    def steps(self) -> str:
+        """One marker per step at stance onset (Points3D)."""
+        return f"{self.root}/steps"
+
+    @property
+    def step_cov(self) -> str:
+        """Flat horizontal covariance ellipse at each step (Ellipsoids3D with centers)."""
+        return f"{self.root}/step_cov"
+
+    @property
     def truth(self) -> str:
         """Ground-truth track of this foot."""
         return f"{TRUTH}/{self.foot}"
@@ -99,6 +119,26 @@ class FootPaths:
     def detector(self) -> str:
         """Zero-velocity detector ``[statistic, threshold]``."""
         return f"{PLOTS}/detector/{self.foot}"
+
+    @property
+    def speed(self) -> str:
+        """Horizontal speed of the IMU, m/s."""
+        return f"{PLOTS}/speed/{self.foot}"
+
+    @property
+    def heading(self) -> str:
+        """Heading (yaw of the body x axis, counter-clockwise from the start direction), degrees."""
+        return f"{PLOTS}/heading/{self.foot}"
+
+    @property
+    def rate(self) -> str:
+        """Link health: samples received per second of host time, Hz."""
+        return f"{PLOTS}/rate/{self.foot}"
+
+    @property
+    def link_errors(self) -> str:
+        """Link health: ``[lost packets, reconnects]`` since the start (cumulative counts)."""
+        return f"{PLOTS}/link_errors/{self.foot}"
 
     @property
     def gait(self) -> str:

@@ -132,6 +132,79 @@ def spawn_viewer(
     )
 
 
+WEB_VIEWER_START_TIMEOUT_S = 15.0
+
+
+def web_viewer_url(web_port: int, grpc_port: int) -> str:
+    """The URL that opens the hosted web viewer connected to the gRPC server on ``grpc_port``."""
+    from urllib.parse import quote
+
+    return f"http://{LOOPBACK}:{web_port}/?url=" + quote(f"rerun+http://{LOOPBACK}:{grpc_port}/proxy", safe="")
+
+
+def serve_web_viewer(
+    *,
+    server_memory_limit: str = VIEWER_SERVER_MEMORY_LIMIT,
+    timeout_s: float = WEB_VIEWER_START_TIMEOUT_S,
+    web_port: int | None = None,
+) -> tuple[str, str, subprocess.Popen[bytes]]:
+    """Host the Rerun web viewer and its gRPC proxy on 127.0.0.1 (the viewer binary, ``--serve-web``).
+
+    ``rr.serve_web_viewer``/``rr.serve_grpc`` would bind 0.0.0.0; the CLI with ``--bind`` does not.
+    The server runs in its own session and outlives footnav so the page keeps working; it buffers
+    at most ``server_memory_limit`` for late browsers.
+
+    Returns:
+        ``(grpc_url for rr.GrpcSink, page URL to open in a browser, process)``.
+
+    Raises:
+        ViewerStartError: it exited or did not open its ports in time.
+    """
+    grpc_port = _free_loopback_port()
+    web_port = web_port or _free_loopback_port()
+    cmd = [
+        str(viewer_binary()),
+        "--serve-web",
+        "--bind", LOOPBACK,
+        "--port", str(grpc_port),
+        "--web-viewer-port", str(web_port),
+        "--server-memory-limit", server_memory_limit,
+    ]  # fmt: skip
+    proc = subprocess.Popen(
+        cmd,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise ViewerStartError(
+                f"the Rerun web viewer server exited at start-up (code {proc.returncode}); "
+                f"try `{' '.join(cmd)}` yourself to see why, or use --save FILE.rrd"
+            )
+        if _port_open(grpc_port) and _port_open(web_port):
+            return f"rerun+http://{LOOPBACK}:{grpc_port}/proxy", web_viewer_url(web_port, grpc_port), proc
+        time.sleep(0.05)
+    proc.terminate()
+    raise ViewerStartError(
+        f"the Rerun web viewer did not open ports {grpc_port}/{web_port} within {timeout_s:.0f} s; "
+        "use --save FILE.rrd and open the file later"
+    )
+
+
+def check_writable(path: Path) -> str | None:
+    """None if a recording can be written at ``path`` (the file is created), else why not, in words."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "wb"):
+            pass
+    except OSError as exc:
+        return f"cannot write the recording to {path}: {exc.strerror or exc}"
+    return None
+
+
 def default_save_path(now: datetime | None = None, directory: Path | None = None) -> Path:
     """``footnav-YYYYmmdd-HHMMSS.rrd`` in ``directory`` (default: the working directory)."""
     stamp = (now or datetime.now()).strftime("%Y%m%d-%H%M%S")

@@ -1,0 +1,270 @@
+"""Configuration: defaults < ``footnav.toml`` (or ``--config FILE``) < the command line, and where
+each value came from.
+
+The file (TOML, read with :mod:`tomllib`)::
+
+    [session]
+    sessions_dir = "sessions"   # capture files go here
+    capture = true              # capture every live session (and the demo)
+
+    [unit]
+    profile = "mpu6500x4"       # a built-in profile or one of [profiles.NAME]
+    rate_divider = 0            # output every 2**K samples of the 1 kHz base rate
+
+    [filter]                    # pipeline.navigator.NavConfig (SI units, radians)
+    align_s = 0.5
+    init_yaw_sigma_rad = 0.0002
+
+    [detector]                  # pipeline.detectors: the dataclass of NavConfig.detector
+    threshold = 25.0
+    window_s = 0.01
+
+    [profiles.myshoe]           # a unit profile: a built-in base plus pipeline.profiles.UnitProfile fields
+    base = "mpu6500x4"
+    gyr_bias_init_radps = 0.003
+
+Keys map one to one onto the dataclass fields named above, with the same meaning and units; an
+unknown key or a wrong type is an error naming the file, the key and what is allowed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pipeline.errors import FootnavError
+from pipeline.navigator import NavConfig
+from pipeline.profiles import PROFILES, UnitProfile
+
+DEFAULT_FILE = "footnav.toml"
+DEFAULT_SESSIONS_DIR = "sessions"
+
+DEFAULT = "default"
+CLI = "command line"
+
+_SESSION_DEFAULTS: dict[str, Any] = {"sessions_dir": DEFAULT_SESSIONS_DIR, "capture": True}
+_UNIT_DEFAULTS: dict[str, Any] = {"profile": "mpu6500x4", "rate_divider": 0}
+_FILTER_FIELDS = {f.name: f for f in dataclasses.fields(NavConfig) if f.name not in ("profile", "detector")}
+_DETECTOR_CLS = type(NavConfig().detector)
+"""The detector settings dataclass of ``NavConfig.detector`` (pipeline.detectors)."""
+_DETECTOR_FIELDS = {f.name: f for f in dataclasses.fields(_DETECTOR_CLS)}
+_PROFILE_FIELDS = {f.name: f for f in dataclasses.fields(UnitProfile) if f.name != "name"}
+
+
+class ConfigError(FootnavError):
+    """The configuration file or a setting is invalid."""
+
+
+@dataclass(frozen=True, slots=True)
+class Setting:
+    """A value and where it came from (``default``, ``file PATH``, ``command line``, ``capture FILE``)."""
+
+    value: Any
+    source: str
+
+
+@dataclass
+class Config:
+    """The effective configuration.
+
+    Attributes:
+        values: ``section.key`` -> :class:`Setting` for session, unit, filter and detector keys.
+        profiles: every known unit profile (built-in and from the file), with its source.
+        file: the configuration file read, if any.
+    """
+
+    values: dict[str, Setting]
+    profiles: dict[str, tuple[UnitProfile, str]] = field(default_factory=dict)
+    file: Path | None = None
+
+    def __getitem__(self, key: str) -> Any:
+        return self.values[key].value
+
+    def source(self, key: str) -> str:
+        return self.values[key].source
+
+    def profile(self) -> UnitProfile:
+        name = self["unit.profile"]
+        try:
+            return self.profiles[name][0]
+        except KeyError:
+            known = ", ".join(sorted(self.profiles))
+            raise ConfigError(
+                f"unknown unit profile {name!r} ({self.source('unit.profile')}); known: {known}"
+            ) from None
+
+    def detector(self) -> Any:
+        """The zero-velocity detector settings (``NavConfig.detector``'s dataclass)."""
+        return _DETECTOR_CLS(**{k: self[f"detector.{k}"] for k in _DETECTOR_FIELDS})
+
+    def nav_config(self) -> NavConfig:
+        """The navigator settings (``pipeline.navigator.NavConfig``) this configuration describes."""
+        return NavConfig(
+            profile=self.profile(),
+            detector=self.detector(),
+            **{k: self[f"filter.{k}"] for k in _FILTER_FIELDS},
+        )
+
+    def set(self, key: str, value: Any, source: str) -> None:
+        """Override one value (``None`` leaves it alone)."""
+        if value is None:
+            return
+        if key not in self.values:
+            raise ConfigError(f"unknown setting {key!r}")
+        self.values[key] = Setting(_coerce(key, value, self.values[key].value, source), source)
+
+    def lines(self) -> list[str]:
+        """``key = value  # source`` lines, as ``footnav config`` prints them (TOML-like)."""
+        out: list[str] = []
+        width = max(len(k) for k in self.values) + 2
+        section = ""
+        for key, s in self.values.items():
+            sec, _, name = key.partition(".")
+            if sec != section:
+                out.append(f"{'' if not out else chr(10)}[{sec}]")
+                section = sec
+            out.append(f"{name + ' = ' + _toml(s.value):<{width + 24}}  # {s.source}")
+        prof, src = self.profiles.get(self["unit.profile"], (None, ""))
+        if prof is not None:
+            out.append(f"\n# unit profile {prof.name!r} in use ({src})")
+            out.append(f"[profiles.{prof.name}]")
+            for name in _PROFILE_FIELDS:
+                out.append(f"{name} = {_toml(getattr(prof, name))}")
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        """The navigator settings as plain JSON values (for a capture header)."""
+        nav = self.nav_config()
+        return {
+            "profile": dataclasses.asdict(nav.profile),
+            "detector": dataclasses.asdict(nav.detector),
+            "filter": {k: getattr(nav, k) for k in _FILTER_FIELDS},
+        }
+
+
+def _toml(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value)
+    return repr(value)
+
+
+def _coerce(key: str, value: Any, default: Any, source: str) -> Any:
+    """Check ``value`` against the type of the default; ints are fine where floats are expected."""
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+    elif isinstance(default, int):
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    elif isinstance(default, float):
+        ok = isinstance(value, int | float) and not isinstance(value, bool)
+        value = float(value) if ok else value
+    else:
+        ok = isinstance(value, str)
+    if not ok:
+        raise ConfigError(f"{source}: {key} must be {type(default).__name__}, got {value!r}")
+    return value
+
+
+def defaults() -> Config:
+    """The built-in configuration."""
+    nav = NavConfig()
+    values: dict[str, Setting] = {}
+    for k, v in _SESSION_DEFAULTS.items():
+        values[f"session.{k}"] = Setting(v, DEFAULT)
+    for k, v in _UNIT_DEFAULTS.items():
+        values[f"unit.{k}"] = Setting(v, DEFAULT)
+    for k in _FILTER_FIELDS:
+        values[f"filter.{k}"] = Setting(getattr(nav, k), DEFAULT)
+    for k in _DETECTOR_FIELDS:
+        values[f"detector.{k}"] = Setting(getattr(nav.detector, k), DEFAULT)
+    profiles = {name: (p, "built-in") for name, p in PROFILES.items()}
+    return Config(values, profiles)
+
+
+def _apply_table(cfg: Config, data: dict[str, Any], source: str, where: str) -> None:
+    for section in ("session", "unit", "filter", "detector"):
+        table = data.get(section, {})
+        if not isinstance(table, dict):
+            raise ConfigError(f"{where}: [{section}] must be a table")
+        for key, value in table.items():
+            full = f"{section}.{key}"
+            if full not in cfg.values:
+                known = ", ".join(k.partition(".")[2] for k in cfg.values if k.startswith(section + "."))
+                raise ConfigError(f"{where}: unknown key {key!r} in [{section}]; known: {known}")
+            cfg.set(full, value, source)
+    profiles = data.get("profiles", {})
+    if not isinstance(profiles, dict):
+        raise ConfigError(f"{where}: [profiles] must hold tables like [profiles.myshoe]")
+    for name, table in profiles.items():
+        if not isinstance(table, dict):
+            raise ConfigError(f"{where}: [profiles.{name}] must be a table")
+        base_name = table.get("base", "generic")
+        if base_name not in cfg.profiles:
+            raise ConfigError(
+                f"{where}: [profiles.{name}] base {base_name!r} is not a known profile "
+                f"({', '.join(sorted(cfg.profiles))})"
+            )
+        base = cfg.profiles[base_name][0]
+        changes: dict[str, Any] = {"name": name}
+        for key, value in table.items():
+            if key == "base":
+                continue
+            if key not in _PROFILE_FIELDS:
+                raise ConfigError(
+                    f"{where}: unknown key {key!r} in [profiles.{name}]; known: base, {', '.join(_PROFILE_FIELDS)}"
+                )
+            changes[key] = _coerce(f"profiles.{name}.{key}", value, getattr(base, key), where)
+        cfg.profiles[name] = (dataclasses.replace(base, **changes), f"{source} [profiles.{name}], base {base_name}")
+    unknown = set(data) - {"session", "unit", "filter", "detector", "profiles"}
+    if unknown:
+        raise ConfigError(
+            f"{where}: unknown section(s) {', '.join(sorted(unknown))}; "
+            "known: session, unit, filter, detector, profiles"
+        )
+
+
+def load_config(path: Path | None = None, *, cwd: Path | None = None) -> Config:
+    """Defaults, then ``path`` (which must exist) or else ``footnav.toml`` in ``cwd`` if there is one.
+
+    Raises:
+        ConfigError: the file cannot be read, is not TOML, or holds an unknown key or a wrong type.
+    """
+    cfg = defaults()
+    file = path if path is not None else (cwd or Path.cwd()) / DEFAULT_FILE
+    if path is None and not file.is_file():
+        return cfg
+    try:
+        data = tomllib.loads(file.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(f"cannot read the configuration file {file}: {exc.strerror or exc}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{file} is not valid TOML: {exc}") from exc
+    _apply_table(cfg, data, f"file {file}", str(file))
+    cfg.file = file
+    return cfg
+
+
+def apply_capture_settings(cfg: Config, nav_json: dict[str, Any], source: str) -> None:
+    """Take the navigator settings recorded in a capture header (see :meth:`Config.to_json`)."""
+    prof = nav_json.get("profile")
+    if isinstance(prof, dict) and "name" in prof:
+        try:
+            up = UnitProfile(**prof)
+        except TypeError:
+            up = None
+        if up is not None:
+            name = str(prof["name"])
+            if name not in cfg.profiles or cfg.profiles[name][0] != up:
+                cfg.profiles[name] = (up, source)
+            cfg.set("unit.profile", name, source)
+    for section in ("filter", "detector"):
+        table = nav_json.get(section, {})
+        if isinstance(table, dict):
+            for key, value in table.items():
+                if f"{section}.{key}" in cfg.values:
+                    cfg.set(f"{section}.{key}", value, source)

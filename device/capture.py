@@ -1,0 +1,522 @@
+"""Capture files: every byte a unit sent and was sent, with host timestamps, in MCAP.
+
+Format (``.mcap``, profile ``footnav``, capture format version :data:`FORMAT_VERSION`):
+
+- an MCAP ``Header`` (profile ``footnav``, library ``footnav <version>``);
+- a ``Metadata`` record ``footnav.session`` (footnav version, format version, start time, the host
+  clock offset) and one ``footnav.unit`` record per unit (foot, unit kind, firmware command set,
+  transport, port, settings and calibration as JSON), written before any data;
+- per unit (``<foot>`` is ``foot``, ``left`` or ``right``) three channels without schema:
+  ``<foot>/rx`` device -> host bytes, ``<foot>/tx`` host -> device bytes (message encoding
+  ``application/octet-stream``; one message per read or write, exactly as the link saw it) and
+  ``<foot>/events`` (``application/json``: session start/stop marks, e.g. how many samples the live
+  session navigated, so that a replay stops where the live session stopped);
+- message ``publish_time`` = the host's ``time.monotonic_ns()`` of the read (what the unit driver
+  stamps samples with), ``log_time`` = the same instant on the wall clock (ns since the Unix epoch);
+- zstd-compressed chunks, one at least every :data:`FLUSH_PERIOD_S`, each flushed to the OS as it
+  closes, and the MCAP summary (index, statistics) at a clean close.
+
+Why MCAP: it is the robotics field's standard log container, append-only by design, readable while it
+grows and after a crash up to the last complete chunk (a killed writer leaves no summary; the stream
+reader does not need one), chunk CRCs catch corruption, and any MCAP tool (``mcap info``, Foxglove)
+can list and export the raw bytes. The ``mcap`` Python package is pure Python.
+
+Reading: :func:`read_capture_info` for the header, :func:`iter_capture` for the messages (it stops at
+the end of a truncated file and reports it), and :class:`CaptureReplayLink`, a :class:`ByteLink` that
+plays one unit's device -> host bytes back chunk for chunk, so the same unit driver decodes them.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import struct
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import IO, Any, Final, Literal
+
+from mcap.exceptions import McapError
+from mcap.records import Channel, Header, Message, Metadata
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+
+from pipeline.errors import InputFormatError
+
+FORMAT_VERSION: Final = 1
+PROFILE: Final = "footnav"
+SUFFIX: Final = ".mcap"
+FLUSH_PERIOD_S: Final = 0.1
+"""Data is on disk (in the OS) at most this long after it was read."""
+_MAGIC: Final = b"\x89MCAP0\r\n"
+_BYTES: Final = "application/octet-stream"
+_JSON: Final = "application/json"
+EXPECTED: Final = "a footnav capture (.mcap, MCAP profile 'footnav')"
+
+Direction = Literal["rx", "tx"]
+
+
+def footnav_version() -> str:
+    """The installed footnav version (``0+unknown`` when running from a bare checkout)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("footnav")
+    except PackageNotFoundError:  # pragma: no cover - always installed in development
+        return "0+unknown"
+
+
+@dataclass(frozen=True, slots=True)
+class UnitHeader:
+    """What a capture records about one unit before its bytes.
+
+    Attributes:
+        foot: ``foot`` (one unit), ``left`` or ``right``: the channel prefix.
+        unit: kind of unit, e.g. ``OpenShoe/MIMU (normal IMU 0x40)``.
+        command_set: firmware command set spoken, e.g. ``openshoe-2015``.
+        transport: ``serial``, ``ble`` or ``pty (emulator)``.
+        port: port, device path or address.
+        settings: output settings sent to the unit (rate divider, mode), JSON-able.
+        calibration: what is known of the unit's calibration and the noise profile assumed, JSON-able.
+    """
+
+    foot: str
+    unit: str
+    command_set: str
+    transport: str
+    port: str
+    settings: dict[str, Any] = field(default_factory=dict)
+    calibration: dict[str, Any] = field(default_factory=dict)
+
+    def to_metadata(self) -> dict[str, str]:
+        d = asdict(self)
+        return {k: json.dumps(v) if isinstance(v, dict) else str(v) for k, v in d.items()}
+
+    @classmethod
+    def from_metadata(cls, md: dict[str, str]) -> UnitHeader:
+        def obj(key: str) -> dict[str, Any]:
+            try:
+                value = json.loads(md.get(key, "{}"))
+            except json.JSONDecodeError:
+                return {}
+            return value if isinstance(value, dict) else {}
+
+        return cls(
+            foot=md.get("foot", "foot"),
+            unit=md.get("unit", ""),
+            command_set=md.get("command_set", ""),
+            transport=md.get("transport", ""),
+            port=md.get("port", ""),
+            settings=obj("settings"),
+            calibration=obj("calibration"),
+        )
+
+
+CaptureTap = Callable[[Direction, int, bytes], None]
+
+
+class CaptureWriter:
+    """Write a capture file; safe to call from one thread (the event loop) while a timer flushes.
+
+    Args:
+        path: the ``.mcap`` file to create (parent folders are created).
+        session: extra ``footnav.session`` metadata (e.g. the command line).
+        flush_period_s: longest time between a read and its bytes reaching the OS.
+
+    Raises:
+        OSError: the file cannot be created.
+    """
+
+    def __init__(
+        self, path: Path, *, session: dict[str, str] | None = None, flush_period_s: float = FLUSH_PERIOD_S
+    ) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file: IO[bytes] = open(self.path, "xb")  # noqa: SIM115 - closed in close()
+        self._writer = Writer(self._file, compression=CompressionType.ZSTD, chunk_size=1 << 20)
+        self._lock = threading.Lock()
+        self._channels: dict[tuple[str, str], int] = {}
+        self._sequence = 0
+        self._dirty = False
+        self._closed = False
+        self.messages = 0
+        self.bytes_captured = 0
+        self.rx_bytes = 0
+        """Device -> host bytes captured (0: no unit ever answered)."""
+        self.write_seconds = 0.0
+        """Time spent in the tap and in flushes (the capture's cost), s."""
+        self._mono_to_wall_ns = time.time_ns() - time.monotonic_ns()
+        self._writer.start(profile=PROFILE, library=f"footnav {footnav_version()}")
+        meta = {
+            "footnav_version": footnav_version(),
+            "format_version": str(FORMAT_VERSION),
+            "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            "monotonic_to_unix_ns": str(self._mono_to_wall_ns),
+        }
+        meta.update(session or {})
+        self._writer.add_metadata("footnav.session", meta)
+        self._writer.flush()
+        self._period = flush_period_s
+        self._stop = threading.Event()
+        self._flusher = threading.Thread(target=self._flush_loop, name="footnav-capture", daemon=True)
+        self._flusher.start()
+
+    def add_unit(self, header: UnitHeader) -> CaptureTap:
+        """Declare a unit and return its tap ``tap(direction, host_ns, data)`` for ``OpenShoeUnit``."""
+        with self._lock:
+            self._writer.add_metadata("footnav.unit", header.to_metadata())
+            for direction in ("rx", "tx"):
+                self._channels[(header.foot, direction)] = self._writer.register_channel(
+                    f"{header.foot}/{direction}", _BYTES, 0, {"direction": direction, "foot": header.foot}
+                )
+            self._channels[(header.foot, "events")] = self._writer.register_channel(
+                f"{header.foot}/events", _JSON, 0, {"foot": header.foot}
+            )
+            self._writer.flush()
+        foot = header.foot
+
+        def tap(direction: Direction, host_ns: int, data: bytes) -> None:
+            if direction == "rx":
+                self.rx_bytes += len(data)
+            self._add(self._channels[(foot, direction)], host_ns, bytes(data))
+
+        return tap
+
+    def event(self, foot: str, name: str, **fields: Any) -> None:
+        """Write a JSON event (``{"event": name, ...}``) on the unit's events channel, now."""
+        payload = json.dumps({"event": name, **fields}).encode()
+        self._add(self._channels[(foot, "events")], time.monotonic_ns(), payload)
+
+    def _add(self, channel: int, host_ns: int, data: bytes) -> None:
+        t0 = time.perf_counter()
+        with self._lock:
+            if self._closed:
+                return
+            self._sequence += 1
+            self._writer.add_message(
+                channel, host_ns + self._mono_to_wall_ns, data, host_ns, sequence=self._sequence
+            )
+            self._dirty = True
+        self.messages += 1
+        self.bytes_captured += len(data)
+        self.write_seconds += time.perf_counter() - t0
+
+    def flush(self) -> None:
+        """Close the current chunk and hand it to the OS (what survives a ``kill -9``)."""
+        t0 = time.perf_counter()
+        with self._lock:
+            if self._closed or not self._dirty:
+                return
+            self._writer.flush()
+            self._dirty = False
+        self.write_seconds += time.perf_counter() - t0
+
+    def _flush_loop(self) -> None:
+        while not self._stop.wait(self._period):
+            try:
+                self.flush()
+            except OSError:  # disk full etc.: keep the session going, say it once at close
+                return
+
+    def close(self) -> None:
+        """Write the summary (index, statistics) and close the file. Idempotent."""
+        self._stop.set()
+        if self._flusher.is_alive() and threading.current_thread() is not self._flusher:
+            self._flusher.join()
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            try:
+                self._writer.finish()
+            finally:
+                self._file.close()
+
+    def __enter__(self) -> CaptureWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+# ------------------------------------------------------------------------------------------ reading
+
+
+@dataclass(frozen=True, slots=True)
+class CaptureInfo:
+    """The header of a capture file.
+
+    Attributes:
+        path: the file.
+        session: ``footnav.session`` metadata.
+        units: one header per unit, in the order they were declared.
+    """
+
+    path: Path
+    session: dict[str, str]
+    units: tuple[UnitHeader, ...]
+
+    @property
+    def feet(self) -> tuple[str, ...]:
+        return tuple(u.foot for u in self.units)
+
+
+@dataclass(frozen=True, slots=True)
+class CaptureMessage:
+    """One read, write or event of a capture (``host_ns``: ``time.monotonic_ns()`` when it happened)."""
+
+    foot: str
+    direction: str  # "rx", "tx" or "events"
+    host_ns: int
+    data: bytes
+
+
+@dataclass(slots=True)
+class ReadState:
+    """How a pass over a capture ended (filled in as :func:`iter_capture` goes)."""
+
+    truncated: bool = False
+    """The file ended inside a record (a crashed or still-running writer): everything before was read."""
+    bytes_read: int = 0
+    size: int = 0
+
+
+def _check_magic(path: Path) -> None:
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(_MAGIC))
+    except OSError as exc:
+        raise InputFormatError(f"cannot read {path}: {exc.strerror or exc}") from exc
+    if head != _MAGIC:
+        what = "an empty file" if not head else "not an MCAP file"
+        raise InputFormatError(f"{path} is {what}; expected {EXPECTED}")
+
+
+def iter_capture(path: Path, state: ReadState | None = None) -> Iterator[CaptureMessage | CaptureInfo]:
+    """Every record of a capture in file order: a :class:`CaptureInfo` once the header has been read
+    (before the first message), then the messages.
+
+    Stops quietly at the end of a truncated file and sets ``state.truncated``.
+
+    Raises:
+        InputFormatError: not an MCAP file, or an MCAP file from another tool.
+    """
+    path = Path(path)
+    _check_magic(path)
+    state = state if state is not None else ReadState()
+    state.size = path.stat().st_size
+    session: dict[str, str] | None = None
+    units: list[UnitHeader] = []
+    channels: dict[int, tuple[str, str]] = {}
+    announced = False
+    with open(path, "rb") as f:
+        reader = StreamReader(f, record_size_limit=1 << 28)
+        records = reader.records
+        while True:
+            try:
+                rec = next(records)
+            except StopIteration:
+                break
+            except (McapError, struct.error, EOFError, ValueError) as exc:
+                if session is None:
+                    raise InputFormatError(f"{path} is not readable as MCAP ({exc}); expected {EXPECTED}") from exc
+                state.truncated = True
+                break
+            state.bytes_read = f.tell()
+            if isinstance(rec, Header):
+                if rec.profile != PROFILE:
+                    raise InputFormatError(
+                        f"{path} is an MCAP file from another tool (profile {rec.profile!r}, "
+                        f"library {rec.library!r}); expected {EXPECTED}"
+                    )
+            elif isinstance(rec, Metadata):
+                if rec.name == "footnav.session":
+                    session = dict(rec.metadata)
+                elif rec.name == "footnav.unit":
+                    units.append(UnitHeader.from_metadata(dict(rec.metadata)))
+            elif isinstance(rec, Channel):
+                foot, _, direction = rec.topic.rpartition("/")
+                channels[rec.id] = (foot, direction)
+            elif isinstance(rec, Message):
+                if not announced:
+                    if session is None:
+                        raise InputFormatError(f"{path} has no footnav.session header; expected {EXPECTED}")
+                    announced = True
+                    yield CaptureInfo(path, session, tuple(units))
+                foot, direction = channels.get(rec.channel_id, ("?", "?"))
+                yield CaptureMessage(foot, direction, rec.publish_time, bytes(rec.data))
+    if not announced:
+        if session is None:
+            raise InputFormatError(f"{path} ends before its footnav.session header; expected {EXPECTED}")
+        yield CaptureInfo(path, session, tuple(units))
+
+
+def read_capture_info(path: Path) -> CaptureInfo:
+    """The header of a capture (reads up to its first message).
+
+    Raises:
+        InputFormatError: see :func:`iter_capture`.
+    """
+    for item in iter_capture(path):
+        if isinstance(item, CaptureInfo):
+            return item
+    raise AssertionError("unreachable: iter_capture always announces the header")  # pragma: no cover
+
+
+@dataclass(frozen=True, slots=True)
+class CaptureSummary:
+    """Counts over a whole capture (one pass)."""
+
+    info: CaptureInfo
+    truncated: bool
+    first_ns: int | None
+    last_ns: int | None
+    rx_bytes: dict[str, int]
+    events: dict[str, list[dict[str, Any]]]
+
+    @property
+    def duration_s(self) -> float:
+        if self.first_ns is None or self.last_ns is None:
+            return 0.0
+        return (self.last_ns - self.first_ns) / 1e9
+
+
+def summarize_capture(path: Path) -> CaptureSummary:
+    """One pass over a capture: time span, bytes per unit, events, truncation."""
+    state = ReadState()
+    info: CaptureInfo | None = None
+    first = last = None
+    rx: dict[str, int] = {}
+    events: dict[str, list[dict[str, Any]]] = {}
+    for item in iter_capture(path, state):
+        if isinstance(item, CaptureInfo):
+            info = item
+            continue
+        if item.direction == "events":
+            with contextlib.suppress(json.JSONDecodeError):
+                events.setdefault(item.foot, []).append(json.loads(item.data))
+            continue
+        if item.direction == "rx":
+            rx[item.foot] = rx.get(item.foot, 0) + len(item.data)
+            first = item.host_ns if first is None else first
+            last = item.host_ns
+    assert info is not None
+    return CaptureSummary(info, state.truncated, first, last, rx, events)
+
+
+class CaptureReplayLink:
+    """A :class:`device.unit.ByteLink` that returns one unit's captured device -> host bytes, one
+    captured read per :meth:`read`, so the unit driver frames and batches them exactly as it did live.
+
+    Host timestamps: the driver stamps a batch with ``time.monotonic_ns()`` right after ``read``
+    returns. :meth:`captured_ns` maps such a replay-time stamp back to the captured read's host time,
+    so replayed estimates carry the live session's ``host_ns``.
+
+    Args:
+        path: the capture.
+        foot: which unit.
+        speed: 1.0 = the captured pace, N = N times faster, ``math.inf`` = as fast as possible.
+        paced: False returns reads at once until :attr:`paced` is set (a replay window's lead-in:
+            decoded, not navigated, not waited for).
+        clock_origin: ``(monotonic_ns at replay start, captured ns at replay start)`` shared by all
+            feet of one replay so they stay in step; default: set at the first read.
+        on_progress: called with (bytes read, file size) now and then.
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        foot: str,
+        *,
+        speed: float = 1.0,
+        paced: bool = True,
+        clock_origin: list[int] | None = None,
+        on_progress: Callable[[int, int], None] | None = None,
+    ) -> None:
+        self.path = Path(path)
+        self.foot = foot
+        self.speed = speed
+        self.paced = paced
+        self.state = ReadState()
+        self.events: list[dict[str, Any]] = []
+        """Events of this unit met so far (JSON objects)."""
+        self.reads = 0
+        self._origin = clock_origin if clock_origin is not None else []
+        self._on_progress = on_progress
+        self._it = iter_capture(self.path, self.state)
+        self._stamps: deque[tuple[int, int]] = deque()  # (replay monotonic ns at return, captured ns)
+        self._closed = False
+        self.writes: list[bytes] = []
+        """Bytes the host wrote during the replay (nothing is sent anywhere)."""
+
+    @property
+    def name(self) -> str:
+        return f"{self.path.name} [{self.foot}]"
+
+    def _next_rx(self) -> CaptureMessage | None:
+        for item in self._it:
+            if isinstance(item, CaptureInfo):
+                if self.foot not in item.feet:
+                    known = ", ".join(item.feet) or "none"
+                    raise InputFormatError(f"{self.path} has no unit {self.foot!r} (units: {known})")
+                continue
+            if item.foot != self.foot:
+                continue
+            if item.direction == "events":
+                with contextlib.suppress(json.JSONDecodeError):
+                    self.events.append(json.loads(item.data))
+                continue
+            if item.direction != "rx":
+                continue
+            return item
+        return None
+
+    async def read(self) -> bytes:
+        """The next captured read; ``b""`` at the end of the capture or the window."""
+        if self._closed:
+            return b""
+        item = self._next_rx()
+        if item is None:
+            self._closed = True
+            return b""
+        if self.paced and not self._origin:
+            self._origin[:] = [time.monotonic_ns(), item.host_ns]
+        if not self.paced:
+            pass  # a window's lead-in: decoded at once
+        elif self.speed != float("inf"):
+            due_ns = self._origin[0] + (item.host_ns - self._origin[1]) / self.speed
+            delay = (due_ns - time.monotonic_ns()) / 1e9
+            if delay > 0:
+                await asyncio.sleep(delay)
+        elif self.reads % 64 == 0:
+            await asyncio.sleep(0)  # let the other foot and the sinks run
+        self.reads += 1
+        if self._on_progress is not None and self.reads % 256 == 0:
+            self._on_progress(self.state.bytes_read, self.state.size)
+        self._stamps.append((time.monotonic_ns(), item.host_ns))
+        return item.data
+
+    def captured_ns(self, replay_ns: int) -> int:
+        """The captured host time of the read that a driver stamped ``replay_ns`` (see class doc).
+
+        Stamps must be asked for in increasing order (batches arrive in order).
+        """
+        stamps = self._stamps
+        while len(stamps) > 1 and stamps[1][0] <= replay_ns:
+            stamps.popleft()
+        if not stamps:
+            return replay_ns
+        return stamps[0][1]
+
+    async def write(self, data: bytes) -> None:
+        """Commands go nowhere in a replay; kept for inspection."""
+        self.writes.append(bytes(data))
+
+    async def close(self) -> None:
+        self._closed = True
+        with contextlib.suppress(Exception):
+            self._it.close()  # type: ignore[attr-defined]

@@ -1,0 +1,181 @@
+"""Capture files and replay: replay equals live exactly, truncated/foreign files, kill -9 mid-capture."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.writer import Writer
+
+from app.config import defaults
+from app.demo import DemoOptions, run_demo
+from app.replay import ReplayOptions, run_replay
+from device.capture import (
+    CaptureInfo,
+    CaptureWriter,
+    UnitHeader,
+    iter_capture,
+    read_capture_info,
+    summarize_capture,
+)
+from pipeline.errors import InputFormatError
+from pipeline.nav_types import NavBatch
+from views.convert import concat_batches
+
+FIELDS = ("t_s", "pos_n_m", "vel_n_mps", "quat_nb_wxyz", "pos_cov_n_m2", "stance", "detector_stat",
+          "detector_threshold", "clearance_m", "host_ns")  # fmt: skip
+
+
+def collector() -> tuple[dict[str, list[NavBatch]], Callable[[str], Callable[[NavBatch], None]]]:
+    got: dict[str, list[NavBatch]] = {}
+
+    def make(foot: str) -> Callable[[NavBatch], None]:
+        return got.setdefault(foot, []).append
+
+    return got, make
+
+
+def demo_capture(tmp: Path, *, pace: float, duration_s: float, feet: int = 1) -> tuple[Path, dict[str, NavBatch]]:
+    cfg = defaults()
+    cfg.set("session.sessions_dir", str(tmp), "test")
+    got, make = collector()
+    code = run_demo(
+        DemoOptions(duration_s=duration_s, viewer=False, realtime=pace, feet=feet, config=cfg, collect=make)
+    )
+    assert code == 0
+    (path,) = tmp.glob("*.mcap")
+    return path, {foot: concat_batches(b) for foot, b in got.items()}
+
+
+def replay(path: Path, **kw: object) -> dict[str, NavBatch]:
+    got, make = collector()
+    assert run_replay(ReplayOptions(path=path, config=defaults(), viewer=False, collect=make, **kw)) == 0  # type: ignore[arg-type]
+    return {foot: concat_batches(b) for foot, b in got.items()}
+
+
+def assert_identical(a: NavBatch, b: NavBatch) -> None:
+    assert len(a) == len(b)
+    for name in FIELDS:
+        x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name))
+        assert x.dtype == y.dtype, name
+        np.testing.assert_array_equal(x, y, err_msg=name)  # bit for bit, host times included
+
+
+@pytest.mark.parametrize(("pace", "duration_s"), [(math.inf, 20.0), (4.0, 8.0)])
+def test_replay_equals_live_exactly(tmp_path: Path, pace: float, duration_s: float) -> None:
+    path, live = demo_capture(tmp_path, pace=pace, duration_s=duration_s)
+    assert len(live["foot"]) == int(duration_s * 1000)
+    info = read_capture_info(path)
+    assert info.session["footnav_version"] and info.session["format_version"] == "1"
+    (unit,) = info.units
+    assert unit.foot == "foot" and unit.transport == "pty (emulator)" and "0x40" in unit.unit
+    assert unit.settings["rate_divider_log2"] == 0 and unit.settings["nav_config"]["profile"]["name"]
+    assert unit.command_set and unit.calibration
+    assert_identical(live["foot"], replay(path)["foot"])
+
+
+def test_two_feet_capture_replays_both(tmp_path: Path) -> None:
+    path, live = demo_capture(tmp_path, pace=math.inf, duration_s=12.0, feet=2)
+    assert read_capture_info(path).feet == ("left", "right")
+    again = replay(path)
+    for foot in ("left", "right"):
+        assert_identical(live[foot], again[foot])
+    # the window is in session seconds (whole read batches around 1..8 s); navigation aligns on the
+    # still start, which the window still holds (mid-walk the foot never rests the 0.5 s it needs)
+    part = replay(path, start_s=1.0, end_s=8.0)["left"]
+    assert 0.5 < part.t_s[0] < 1.5 and 7.5 < part.t_s[-1] < 8.5
+
+
+def test_capture_holds_both_directions_and_header(tmp_path: Path) -> None:
+    path = tmp_path / "c.mcap"
+    with CaptureWriter(path, session={"command": "test"}) as w:
+        tap = w.add_unit(UnitHeader("foot", "u", "openshoe-2015", "serial", "/dev/ttyX", {"k": 1}, {"c": 2}))
+        tap("tx", 5, b"\x40\x00\x40")
+        tap("rx", 7, b"\xa0\x40\x00\xe0")
+        w.event("foot", "end", samples=0)
+    items = list(iter_capture(path))
+    assert isinstance(items[0], CaptureInfo) and items[0].session["command"] == "test"
+    assert items[0].units[0].settings == {"k": 1} and items[0].units[0].calibration == {"c": 2}
+    msgs = [(m.direction, m.host_ns, m.data) for m in items[1:] if not isinstance(m, CaptureInfo)]
+    assert msgs[:2] == [("tx", 5, b"\x40\x00\x40"), ("rx", 7, b"\xa0\x40\x00\xe0")]
+    assert msgs[2][0] == "events"
+
+
+def test_truncated_capture_replays_up_to_its_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path, live = demo_capture(tmp_path, pace=8.0, duration_s=15.0)  # ~19 chunks of 100 ms
+    data = path.read_bytes()
+    cut = tmp_path / "cut" / "cut.mcap"
+    cut.parent.mkdir()
+    cut.write_bytes(data[: int(len(data) * 0.6)])
+    assert summarize_capture(cut).truncated
+    got = replay(cut)["foot"]
+    assert 1000 < len(got) < len(live["foot"])
+    assert_identical(got, NavBatch(**{f: getattr(live["foot"], f)[: len(got)] for f in FIELDS}))
+    assert "ends mid-record" in capsys.readouterr().err
+    tiny = tmp_path / "cut" / "tiny.mcap"
+    tiny.write_bytes(data[:20])
+    with pytest.raises(InputFormatError, match=r"expected a footnav capture \(\.mcap"):
+        replay(tiny)
+
+
+def test_foreign_files_name_what_was_expected(tmp_path: Path) -> None:
+    csv = tmp_path / "x-io.csv"
+    csv.write_text("Time (s),Gyroscope X (deg/s)\n0,0\n")
+    mat = tmp_path / "pyshoe.mat"
+    mat.write_bytes(b"MATLAB 5.0 MAT-file" + bytes(200))
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    ros = tmp_path / "ros.mcap"
+    with open(ros, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="rosbag2")
+        w.finish()
+    for path, needle in [(csv, "unsupported format"), (mat, "unsupported format"), (empty, "empty file"),
+                         (ros, "another tool")]:  # fmt: skip
+        with pytest.raises(InputFormatError, match="expected a footnav capture") as err:
+            replay(path)
+        assert needle in str(err.value)
+    proc = subprocess.run(
+        [sys.executable, "-m", "app", "replay", str(csv), "--no-viewer"], capture_output=True, text=True, check=False
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "unsupported format" in proc.stderr and "expected a footnav capture (.mcap" in proc.stderr
+
+
+def test_kill_9_leaves_a_readable_capture(tmp_path: Path) -> None:
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "app", "demo", "--duration", "30", "--no-viewer", "--sessions", str(tmp_path)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=env,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:  # wait for ~3 s of streamed data on disk
+            files = list(tmp_path.glob("*.mcap"))
+            if files and files[0].stat().st_size > 100_000:
+                break
+            time.sleep(0.2)
+        time.sleep(0.5)
+        size_before_kill = files[0].stat().st_size
+        killed_ns = time.monotonic_ns()  # the same clock as the capture's host times
+        os.kill(proc.pid, signal.SIGKILL)
+    finally:
+        proc.wait(timeout=30)
+    (path,) = files
+    assert path.stat().st_size >= size_before_kill  # nothing lost after the last flush
+    summary = summarize_capture(path)
+    assert summary.rx_bytes["foot"] > 50_000 and summary.duration_s > 1.5
+    assert summary.last_ns is not None and (killed_ns - summary.last_ns) / 1e9 < 1.0  # flushed every 0.1 s
+    assert "end" not in [e.get("event") for e in summary.events.get("foot", [])]
+    got = replay(path)["foot"]
+    assert len(got) > 2000

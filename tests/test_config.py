@@ -1,0 +1,89 @@
+"""Configuration: defaults < footnav.toml < command line, with sources; bad files are clear errors."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from app.config import CLI, ConfigError, load_config
+from pipeline.navigator import NavConfig
+from pipeline.profiles import PROFILES
+
+TOML = """
+[session]
+sessions_dir = "caps"
+
+[unit]
+profile = "myshoe"
+
+[filter]
+align_s = 0.8
+
+[detector]
+threshold = 30
+
+[profiles.myshoe]
+base = "adis16367"
+gyr_bias_init_radps = 0.003
+"""
+
+
+def test_file_and_command_line_override_defaults_with_sources(tmp_path: Path) -> None:
+    (tmp_path / "footnav.toml").write_text(TOML)
+    cfg = load_config(cwd=tmp_path)
+    assert cfg.file == tmp_path / "footnav.toml"
+    assert cfg["filter.align_s"] == 0.8 and cfg.source("filter.align_s").startswith("file ")
+    assert cfg["detector.threshold"] == 30.0 and isinstance(cfg["detector.threshold"], float)
+    assert cfg.source("filter.dt_max_s") == "default"
+    nav = cfg.nav_config()
+    assert isinstance(nav, NavConfig) and nav.align_s == 0.8 and nav.detector.threshold == 30.0
+    assert nav.profile.name == "myshoe" and nav.profile.gyr_bias_init_radps == 0.003
+    assert nav.profile.acc_noise_mps2_rthz == PROFILES["adis16367"].acc_noise_mps2_rthz  # from the base
+    cfg.set("unit.profile", "gx3", CLI)
+    assert cfg.profile() is PROFILES["gx3"] and cfg.source("unit.profile") == CLI
+    assert load_config(cwd=tmp_path / "nowhere").source("filter.align_s") == "default"
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        ("[filter]\nalign = 1\n", "unknown key 'align' in [filter]"),
+        ("[detector]\nthreshold = 'high'\n", "detector.threshold must be float"),
+        ("[profiles.x]\nbase = 'nope'\n", "base 'nope' is not a known profile"),
+        ("[viewer]\nx = 1\n", "unknown section"),
+        ("[filter\n", "not valid TOML"),
+    ],
+)
+def test_bad_files_say_what_is_wrong(tmp_path: Path, text: str, needle: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        load_config(path)
+    assert needle in str(err.value) and str(path) in str(err.value)
+
+
+def test_config_command_shows_values_and_sources(tmp_path: Path) -> None:
+    (tmp_path / "footnav.toml").write_text(TOML)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    proc = subprocess.run(
+        [sys.executable, "-m", "app", "config", "--rate-divider", "2"],
+        capture_output=True, text=True, cwd=tmp_path, env=env, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    out = proc.stdout
+    assert "[filter]" in out and "[detector]" in out and "[profiles.myshoe]" in out
+    line = next(x for x in out.splitlines() if x.startswith("align_s = "))
+    assert "0.8" in line and "file " in line
+    line = next(x for x in out.splitlines() if x.startswith("rate_divider = "))
+    assert "2" in line and "command line" in line
+    line = next(x for x in out.splitlines() if x.startswith("dt_max_s = "))
+    assert line.rstrip().endswith("# default")
+    bad = subprocess.run(
+        [sys.executable, "-m", "app", "config", "--config", str(tmp_path / "missing.toml")],
+        capture_output=True, text=True, env=env, check=False,
+    )  # fmt: skip
+    assert bad.returncode == 2 and "cannot read the configuration file" in bad.stderr

@@ -1,0 +1,223 @@
+"""A session's Rerun outputs — native viewer, web viewer, .rrd file — each with its own logger thread.
+
+Why one :class:`~views.logger.RerunLogger` per output rather than one recording stream with several
+sinks: a gRPC sink whose viewer went away blocks every log call of its stream (rerun-0.41.md, section
+5), which would stop the file too. Separate streams with the same ``recording_id`` keep the file
+writing when a viewer dies; the dead viewer's logger is dropped with a one-line notice, and the
+session and its capture carry on. The outputs merge into one recording wherever they meet.
+"""
+
+from __future__ import annotations
+
+import logging
+import subprocess
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+from numpy.typing import NDArray
+
+from pipeline.nav_types import NavBatch
+from views.logger import RerunLogger
+from views.paths import DEFAULT_FOOT
+from views.sinks import (
+    ViewerStartError,
+    check_writable,
+    default_save_path,
+    has_display,
+    serve_web_viewer,
+    spawn_viewer,
+)
+
+log = logging.getLogger(__name__)
+
+LIVENESS_CHECK_S = 1.0
+DEAD_LOGGER_CLOSE_S = 0.5
+
+
+@dataclass
+class Output:
+    """One destination of the recording.
+
+    Attributes:
+        kind: ``viewer``, ``web`` or ``file``.
+        description: for messages (URL, pid or path).
+        logger: its logger thread.
+        process: the viewer or web server process footnav started, if any (watched for exit).
+        path: the .rrd file, for ``file`` outputs.
+    """
+
+    kind: str
+    description: str
+    logger: RerunLogger
+    process: subprocess.Popen[bytes] | None = None
+    path: Path | None = None
+    alive: bool = True
+
+
+class SessionViews:
+    """Fan-out of one session's estimates to every :class:`Output`; the same calls as RerunLogger.
+
+    Args:
+        outputs: at least one.
+        notice: where one-line notices go (a viewer that died, ...).
+    """
+
+    def __init__(self, outputs: Sequence[Output], *, notice: Callable[[str], None]) -> None:
+        if not outputs:
+            raise ValueError("SessionViews needs at least one output")
+        self.outputs = list(outputs)
+        self.feet = outputs[0].logger.feet
+        self.recording_id = outputs[0].logger.recording_id
+        self._notice = notice
+        self._next_check = 0.0
+
+    @property
+    def live(self) -> list[Output]:
+        return [o for o in self.outputs if o.alive]
+
+    def check_outputs(self) -> None:
+        """Drop outputs whose viewer process exited or whose logger failed (with a notice)."""
+        self._next_check = time.monotonic() + LIVENESS_CHECK_S
+        for out in self.outputs:
+            if not out.alive:
+                continue
+            reason = None
+            if out.process is not None and (code := out.process.poll()) is not None:
+                reason = f"the Rerun {out.kind} ({out.description}) exited (code {code})"
+            elif out.logger.stats.error is not None:
+                reason = f"the Rerun {out.kind} output ({out.description}) failed: {out.logger.stats.error}"
+            if reason is None:
+                continue
+            out.alive = False
+            others = [o.description for o in self.outputs if o.alive]
+            carry = "the session and its capture carry on"
+            if others:
+                carry += " and still record to " + ", ".join(others)
+            self._notice(f"{reason}; {carry}")
+            # its thread may be stuck in a gRPC send: close it in the background, never wait here
+            threading.Thread(
+                target=out.logger.close, args=(DEAD_LOGGER_CLOSE_S,), name="footnav-drop-output", daemon=True
+            ).start()
+
+    def _maybe_check(self) -> None:
+        if time.monotonic() >= self._next_check:
+            self.check_outputs()
+
+    def put(self, nav: NavBatch, *, foot: str = DEFAULT_FOOT, timeout_s: float = 0.0) -> bool:
+        """Queue a batch on every live output; False if any of them dropped it."""
+        self._maybe_check()
+        ok = True
+        for out in self.outputs:
+            if out.alive:
+                ok = out.logger.put(nav, foot=foot, timeout_s=timeout_s) and ok
+        return ok
+
+    def sink(self, foot: str = DEFAULT_FOOT, *, timeout_s: float = 0.0) -> Callable[[NavBatch], bool]:
+        """A NavSink for one foot."""
+
+        def put(nav: NavBatch) -> bool:
+            return self.put(nav, foot=foot, timeout_s=timeout_s)
+
+        return put
+
+    def log_event(self, text: str, *, level: str = "INFO", t_s: float | None = None) -> None:
+        for out in self.live:
+            out.logger.log_event(text, level=level, t_s=t_s)
+
+    def log_truth(
+        self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT
+    ) -> None:
+        for out in self.live:
+            out.logger.log_truth(pos_n_m, t_s=t_s, foot=foot)
+
+    def log_link(
+        self, *, foot: str = DEFAULT_FOOT, t_s: float, rate_hz: float, lost_packets: int, reconnects: int = 0
+    ) -> None:
+        for out in self.live:
+            out.logger.log_link(
+                foot=foot, t_s=t_s, rate_hz=rate_hz, lost_packets=lost_packets, reconnects=reconnects
+            )
+
+    def close(self) -> list[str]:
+        """Close every live output (file footers written); returns notes on what did not close cleanly."""
+        self.check_outputs()
+        notes = []
+        for out in self.outputs:
+            if not out.alive:
+                continue
+            if not out.logger.close():
+                notes.append(f"the Rerun {out.kind} ({out.description}) did not finish in time")
+            elif out.logger.stats.error is not None:
+                notes.append(f"the Rerun {out.kind} ({out.description}) failed: {out.logger.stats.error}")
+        return notes
+
+    def samples_dropped(self) -> int:
+        return max(o.logger.stats.samples_dropped for o in self.outputs)
+
+
+def open_session_views(
+    *,
+    save: Path | None,
+    want_viewer: bool,
+    web: bool = False,
+    feet: Sequence[str] = (DEFAULT_FOOT,),
+    recording_id: str,
+    notice: Callable[[str], None],
+    environ: Mapping[str, str] | None = None,
+) -> tuple[SessionViews | None, list[str]]:
+    """Start a session's outputs and describe them.
+
+    - ``web``: host the web viewer on 127.0.0.1 and stream to it (its URL is in the notes);
+    - else, a viewer wanted and a display present: spawn the native viewer (127.0.0.1);
+    - a viewer wanted but none could start (no display, start-up failure): save to a default file;
+    - ``save``: always also that file. A path that cannot be written is reported and skipped.
+
+    Returns:
+        ``(views, notes)``; ``views`` is None when there is no output at all.
+    """
+    outputs: list[Output] = []
+    notes: list[str] = []
+
+    def logger(sink: rr.GrpcSink | rr.FileSink) -> RerunLogger:
+        return RerunLogger([sink], recording_id=recording_id, feet=feet)
+
+    fallback = False
+    if web:
+        try:
+            grpc_url, page, proc = serve_web_viewer()
+        except ViewerStartError as exc:
+            notes.append(f"web viewer not started: {exc}")
+            fallback = True
+        else:
+            outputs.append(Output("web viewer", page, logger(rr.GrpcSink(grpc_url)), proc))
+            notes.append(f"web viewer (127.0.0.1 only, pid {proc.pid}): open {page}")
+    elif want_viewer:
+        if has_display(environ):
+            try:
+                url, proc = spawn_viewer(env=environ)
+            except ViewerStartError as exc:
+                notes.append(f"viewer not started: {exc}")
+                fallback = True
+            else:
+                outputs.append(Output("viewer", f"pid {proc.pid}", logger(rr.GrpcSink(url)), proc))
+                notes.append(f"streaming to a Rerun viewer (pid {proc.pid}, {url})")
+        else:
+            notes.append("no display (neither DISPLAY nor WAYLAND_DISPLAY is set): no viewer (--web serves one)")
+            fallback = True
+    path = save if save is not None else (default_save_path() if fallback else None)
+    if path is not None:
+        problem = check_writable(path)
+        if problem is not None:
+            notes.append(f"{problem}; carrying on without it")
+        else:
+            outputs.append(Output("recording file", str(path), logger(rr.FileSink(str(path))), path=path))
+            notes.append(f"saving to {path}; view it with `rerun {path}`")
+    if not outputs:
+        notes.append("Rerun output off (no viewer, no file)")
+        return None, notes
+    return SessionViews(outputs, notice=notice), notes
