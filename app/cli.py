@@ -92,11 +92,19 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--seed", type=int, default=1, help="random seed of the emulated sensor errors")
 
     live = sub.add_parser(
-        "live", help="navigate one connected unit, or two (--left/--right), over USB serial"
+        "live", help="navigate one connected unit, or two (--left/--right), over USB serial or BLE"
     )
-    live.add_argument("--port", help="serial port of the unit, e.g. /dev/ttyACM0")
-    live.add_argument("--left", metavar="PORT", help="serial port of the left-foot unit")
-    live.add_argument("--right", metavar="PORT", help="serial port of the right-foot unit")
+    live.add_argument("--port", help="serial port of the unit, e.g. /dev/ttyACM0 (or ble:NAME)")
+    live.add_argument(
+        "--ble",
+        nargs="?",
+        const="",
+        metavar="NAME|ADDRESS",
+        help="the unit over Bluetooth LE, by advertised name or address (alone: the first unit found; "
+        "`footnav scan` lists them)",
+    )
+    live.add_argument("--left", metavar="PORT|ble:NAME", help="the left-foot unit: serial port or ble:NAME")
+    live.add_argument("--right", metavar="PORT|ble:NAME", help="the right-foot unit: serial port or ble:NAME")
     _add_config_args(live)
     live.add_argument(
         "--rate-divider",
@@ -104,9 +112,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         choices=range(7),
         metavar="K",
-        help="output every 2**K samples of the 1 kHz base rate (default 0: 1 kHz)",
+        help="output every 2**K samples of the 1 kHz base rate (default 0: 1 kHz on serial, 2: 250 Hz on BLE)",
     )
     _add_output_args(live, capture=True)
+
+    scan = sub.add_parser("scan", help="list serial ports and BLE devices that look like shoe units")
+    scan.add_argument(
+        "--timeout", type=_positive, default=5.0, metavar="S", help="how long to scan BLE (default 5 s)"
+    )
 
     replay = sub.add_parser("replay", help="replay a footnav capture (.mcap) through the same pipeline")
     replay.add_argument("file", type=Path, metavar="FILE", help="a capture written by footnav live/demo")
@@ -208,16 +221,22 @@ def _config(args: argparse.Namespace) -> Config:
 def _live(args: argparse.Namespace, argv: list[str]) -> int:
     from app.live import LiveOptions, run_live
 
-    if args.port and (args.left or args.right):
-        raise FootnavError("give either --port (one unit) or --left/--right (two units), not both")
-    if args.port:
+    one = [name for name, value in (("--port", args.port), ("--ble", args.ble)) if value is not None]
+    if len(one) > 1 or (one and (args.left or args.right)):
+        raise FootnavError("give one of --port or --ble (one unit), or --left/--right (two units)")
+    if args.ble is not None:
+        ports = {"foot": f"ble:{args.ble}"}
+    elif args.port:
         ports = {"foot": args.port}
     elif args.left and args.right:
         ports = {"left": args.left, "right": args.right}
     elif args.left or args.right:
         ports = {"left": args.left} if args.left else {"right": args.right}
     else:
-        raise FootnavError("which unit? give --port PORT, or --left PORT --right PORT for two feet")
+        raise FootnavError(
+            "which unit? give --port PORT or --ble NAME, or --left PORT --right PORT for two feet "
+            "(`footnav scan` lists units)"
+        )
     cfg = _config(args)
     return run_live(
         LiveOptions(
@@ -230,6 +249,18 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
             argv=("footnav", *argv),
         )
     )
+
+
+def _scan(args: argparse.Namespace) -> int:
+    """Serial ports and BLE units that look like shoe units; without Bluetooth, one line says so."""
+    import asyncio
+
+    from device.discovery import scan
+
+    report = asyncio.run(scan(args.timeout))
+    for line in report.lines():
+        print(line)
+    return 0
 
 
 def _replay(args: argparse.Namespace) -> int:
@@ -269,6 +300,8 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.WARNING, format="footnav: %(message)s"
     )
+    if not args.verbose:  # sessions report link events themselves (terminal, recording, capture)
+        logging.getLogger("device.links").setLevel(logging.ERROR)
     try:
         if args.command == "demo":
             from app.demo import DemoOptions, run_demo
@@ -292,6 +325,8 @@ def main(argv: list[str] | None = None) -> int:
             )
         if args.command == "live":
             return _live(args, argv)
+        if args.command == "scan":
+            return _scan(args)
         if args.command == "replay":
             return _replay(args)
         if args.command == "config":

@@ -21,8 +21,10 @@ from app.config import DEFAULT, Config, defaults
 from app.live import (
     FOOT_START_OFFSET_M,
     FootRun,
+    attach_unit,
     finish_capture,
     foot_sinks,
+    link_reporter,
     new_session_id,
     notice,
     open_capture,
@@ -34,12 +36,13 @@ from app.status import StatusLine
 from device.emulator.gait import GaitTruth, simulate_walk
 from device.emulator.imu_errors import IMU_GRADES, corrupt
 from device.emulator.pty_server import PtyShoeServer
-from device.unit import OpenShoeUnit
 from pipeline.navigator import Navigator
 from pipeline.runner import NavSink
 from views.outputs import open_session_views
 
 PATHS = ("rectangle", "line", "figure8", "stairs")
+DEMO_PUT_TIMEOUT_S = 60.0
+"""At a pace other than real time, how long a batch may wait for room in a Rerun logger's queue."""
 # the profile the filter assumes for each emulated sensor grade
 PROFILE_OF_GRADE = {
     "mpu6500x4": "mpu6500x4",
@@ -156,8 +159,11 @@ def run_demo(opts: DemoOptions) -> int:
         FootRun(foot, server.port, Navigator(nav_config, rate_hz=truth.rate_hz))
         for foot, server in zip(feet, servers, strict=True)
     ]
+    # Faster than real time the emulator waits for footnav, so footnav waits for the Rerun loggers
+    # (as a replay does) rather than dropping samples from the recording.
+    put_timeout_s = 0.0 if opts.realtime == 1.0 else DEMO_PUT_TIMEOUT_S
     for run in runs:
-        foot_sinks(run, views, status, two_feet=two)
+        foot_sinks(run, views, status, two_feet=two, put_timeout_s=put_timeout_s)
         if opts.collect is not None:
             run.sinks.append(opts.collect(run.foot))
         if capture is not None:
@@ -165,10 +171,6 @@ def run_demo(opts: DemoOptions) -> int:
     server_of = dict(zip(feet, servers, strict=True))
 
     async def session(run: FootRun) -> None:
-        def opened(unit: OpenShoeUnit) -> None:
-            if run.health is not None:
-                run.health.stats = lambda: unit.stats
-
         server = server_of[run.foot]
         await run_serial_session(
             server.port,
@@ -179,7 +181,8 @@ def run_demo(opts: DemoOptions) -> int:
             status=status.foot(run.foot),
             result=run.result,
             capture=run.tap,
-            on_open=opened,
+            on_open=lambda unit: attach_unit(run, unit),
+            on_link_event=link_reporter(run, views, capture, two_feet=two),
         )
 
     interrupted = False

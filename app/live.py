@@ -1,8 +1,14 @@
 """``footnav live``: one unit or two (left and right foot), each with its own navigator, shown together.
 
+Units are on USB serial (``/dev/ttyACM0``) or BLE (``ble:NAME|ADDRESS``; 250 Hz by default there).
 Shared by ``live`` and ``demo``: the capture file (every byte, both directions, written by the unit
 driver's tap before any decoding), the Rerun outputs (one recording, one ``recording_id``), the
-one-line status of every foot, and link health.
+one-line status of every foot, and link health. Link faults (unplug, BLE drop, a unit that stops
+streaming) are reconnected by :class:`device.links.ReconnectingLink`; each event is reported on the
+terminal, as a text event in the recording and as a ``link`` event in the capture.
+
+Tests only: :attr:`LiveOptions.ble_backend` injects a bleak backend (bumble's virtual radio) and
+:attr:`LiveOptions.collect` an extra sink per foot; neither is reachable from the command line.
 """
 
 from __future__ import annotations
@@ -15,20 +21,24 @@ from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from app.config import Config
-from app.session import LinkHealth, SerialSessionResult, run_serial_session
+from app.config import DEFAULT, Config
+from app.session import LinkHealth, SerialSessionResult, UnitAddress, run_device_session
 from app.status import StatusLine
 from device.capture import CaptureTap, CaptureWriter, UnitHeader
+from device.links import LinkEvent, LinkGap, ReconnectingLink
 from device.unit import OpenShoeUnit
 from pipeline.errors import DeviceError, FootnavError
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import Navigator
 from pipeline.runner import NavSink
 from views.outputs import SessionViews, open_session_views
+
+if TYPE_CHECKING:
+    from device.ble_link import BleBackend
 
 FOOT_START_OFFSET_M: dict[str, tuple[float, float, float]] = {
     "left": (0.0, 0.1, 0.0),
@@ -39,6 +49,9 @@ navigator starts at its own origin; this offset is for display only)."""
 
 UNIT_KIND = "OpenShoe/MIMU/Oblu, calibrated IMU output (0x40)"
 BASE_RATE_HZ = 1000.0
+BLE_RATE_DIVIDER = 2
+"""Over BLE the default is 250 Hz: 34-byte packets at 1 kHz (34 kB/s) need more than a typical link
+carries (about 16 kB/s at ATT MTU 23 and 6 notifications per 7.5 ms connection event)."""
 
 
 def notice(text: str) -> None:
@@ -108,6 +121,84 @@ class FootRun:
     health: LinkHealth | None = None
     sinks: list[NavSink] = field(default_factory=list)
     error: BaseException | None = None
+    rate_divider_log2: int = 0
+
+
+def rate_divider_for(address: UnitAddress, config: Config) -> int:
+    """The unit's rate divider: the configured one, except over BLE where the default is
+    :data:`BLE_RATE_DIVIDER` (250 Hz); asking for 1 kHz over BLE is allowed, with a warning."""
+    k = int(config["unit.rate_divider"])
+    if address.transport != "ble":
+        return k
+    if config.source("unit.rate_divider") == DEFAULT:
+        return BLE_RATE_DIVIDER
+    if k == 0:
+        notice(
+            f"warning: 1 kHz over BLE ({address.description}, rate divider 0 from "
+            f"{config.source('unit.rate_divider')}) needs about 34 kB/s, more than most BLE links carry "
+            f"(about 16 kB/s at the minimum MTU): expect lost packets; --rate-divider {BLE_RATE_DIVIDER} "
+            f"(250 Hz) is the BLE default"
+        )
+    return k
+
+
+def gap_fields(gap: LinkGap | None) -> dict[str, Any]:
+    """A gap as JSON-able fields (for the capture's events channel)."""
+    if gap is None:
+        return {}
+    return {
+        "reason": gap.reason,
+        "start_ns": gap.start_ns,
+        "detected_ns": gap.detected_ns,
+        "end_ns": gap.end_ns,
+        "duration_s": gap.duration_s,
+        "reconnect_attempts": gap.reconnect_attempts,
+        "last_packet_before": gap.last_packet_before,
+        "first_packet_after": gap.first_packet_after,
+        "packets_missing": gap.packets_missing,
+    }
+
+
+def link_reporter(
+    run: FootRun, views: SessionViews | None, capture: CaptureWriter | None, *, two_feet: bool
+) -> Callable[[LinkEvent], None]:
+    """Report a foot's link events: a notice on the terminal, a text event in the recording, a
+    ``link`` event in the capture (with the gap's figures)."""
+    prefix = f"{run.foot}: " if two_feet else ""
+
+    def report(event: LinkEvent) -> None:
+        text = prefix + event.message
+        notice(text)
+        if views is not None:
+            views.log_event(text, level="INFO" if event.kind in ("reconnected", "resumed") else "WARN")
+        if capture is not None:
+            capture.event(run.foot, "link", kind=event.kind, message=event.message, **gap_fields(event.gap))
+
+    return report
+
+
+def attach_unit(run: FootRun, unit: OpenShoeUnit) -> None:
+    """Point the foot's link-health plot at the unit's counts (lost packets, reconnects)."""
+    if run.health is None:
+        return
+    run.health.stats = lambda: unit.stats
+    link = unit.link
+    if isinstance(link, ReconnectingLink):
+        run.health.reconnects = lambda: link.health.reconnects
+
+
+def link_summary(run: FootRun) -> str:
+    """One line on a foot's link at the end of a session."""
+    lost = run.result.link.lost_packets if run.result.link is not None else 0
+    line = f"samples received: {run.result.samples_received} (lost packets: {lost})"
+    health = run.result.link_health
+    if health is not None:
+        still_open = ", the last one still open at the end" if health.gaps and health.gaps[-1].end_ns is None else ""
+        line += (
+            f"; link: {health.reconnects} reconnects, {health.stalls} stalls, {len(health.gaps)} gaps "
+            f"({health.downtime_s:.2f} s without data, {health.packets_missing} packets missing{still_open})"
+        )
+    return line
 
 
 def foot_sinks(
@@ -167,7 +258,11 @@ class LiveOptions:
     """What ``footnav live`` was asked for.
 
     Attributes:
-        ports: foot name -> serial port: ``{"foot": port}`` for one unit, ``left``/``right`` for two.
+        ports: foot name -> unit address: a serial port, or ``ble:NAME|ADDRESS`` (``ble:`` alone: the
+            first BLE unit found); ``{"foot": ...}`` for one unit, ``left``/``right`` for two.
+        ble_backend: tests only (never set by the command line): the bleak backend for BLE units, e.g.
+            ``device.emulator.ble_backend.bumble_backend(adapter)``; None = the platform's.
+        collect: tests only: an extra NavSink per foot (given the foot name).
     """
 
     ports: dict[str, str]
@@ -177,6 +272,8 @@ class LiveOptions:
     web: bool = False
     capture: bool = True
     argv: tuple[str, ...] = ()
+    ble_backend: BleBackend | None = None
+    collect: Callable[[str], NavSink] | None = None
 
 
 def run_live(opts: LiveOptions) -> int:
@@ -185,12 +282,23 @@ def run_live(opts: LiveOptions) -> int:
     Raises:
         FootnavError: a port cannot be opened, a unit does not answer (all feet failed).
     """
+    try:
+        return asyncio.run(live_session(opts))
+    except KeyboardInterrupt:
+        print("stopped: the unit was told to stop and the recording was closed", file=sys.stderr)
+    return 0
+
+
+async def live_session(opts: LiveOptions) -> int:
+    """:func:`run_live` on the running event loop (cancel it to stop, as Ctrl-C does)."""
     cfg = opts.config
     rate_divider = int(cfg["unit.rate_divider"])
     if not 0 <= rate_divider <= 6:
         raise FootnavError(f"rate divider must be 0..6, got {rate_divider} ({cfg.source('unit.rate_divider')})")
-    rate_hz = BASE_RATE_HZ / 2**rate_divider
+    addresses = {foot: UnitAddress.parse(text) for foot, text in opts.ports.items()}
+    dividers = {foot: rate_divider_for(address, cfg) for foot, address in addresses.items()}
     feet = tuple(opts.ports)
+    two_feet = len(feet) > 1
     session_id = new_session_id("live")
     views, notes = open_session_views(
         save=opts.save, want_viewer=opts.viewer, web=opts.web, feet=feet, recording_id=session_id, notice=notice
@@ -200,38 +308,51 @@ def run_live(opts: LiveOptions) -> int:
     capture = open_capture(cfg, session_id, enabled=opts.capture, extra={"command": " ".join(opts.argv)})
     status = StatusLine(feet=feet)
     nav_config = cfg.nav_config()
-    runs = [FootRun(foot, port, Navigator(nav_config, rate_hz=rate_hz)) for foot, port in opts.ports.items()]
+    runs = [
+        FootRun(
+            foot,
+            str(addresses[foot]),
+            Navigator(nav_config, rate_hz=BASE_RATE_HZ / 2 ** dividers[foot]),
+            rate_divider_log2=dividers[foot],
+        )
+        for foot in feet
+    ]
     for run in runs:
-        foot_sinks(run, views, status, two_feet=len(runs) > 1)
+        foot_sinks(run, views, status, two_feet=two_feet)
+        if opts.collect is not None:
+            run.sinks.append(opts.collect(run.foot))
         if capture is not None:
-            run.tap = capture.add_unit(unit_header(run.foot, run.port, "serial", cfg, rate_divider))
+            transport = addresses[run.foot].transport
+            run.tap = capture.add_unit(unit_header(run.foot, run.port, transport, cfg, run.rate_divider_log2))
 
     async def session(run: FootRun) -> None:
-        def opened(unit: OpenShoeUnit) -> None:
-            if run.health is not None:
-                run.health.stats = lambda: unit.stats
-
-        await run_serial_session(
-            run.port,
+        await run_device_session(
+            addresses[run.foot],
             run.navigator,
             run.sinks,
-            rate_divider_log2=rate_divider,
+            rate_divider_log2=run.rate_divider_log2,
             status=status.foot(run.foot),
             result=run.result,
             capture=run.tap,
-            on_open=opened,
+            on_open=lambda unit: attach_unit(run, unit),
+            on_link_event=link_reporter(run, views, capture, two_feet=two_feet),
+            ble_backend=opts.ble_backend,
         )
 
     if views is not None:
-        views.log_event(f"live session {session_id}: " + ", ".join(f"{f} on {p}" for f, p in opts.ports.items()))
+        views.log_event(
+            f"live session {session_id}: "
+            + ", ".join(f"{f} on {addresses[f].description} at {BASE_RATE_HZ / 2 ** dividers[f]:g} Hz" for f in feet)
+        )
     try:
-        asyncio.run(run_feet(runs, session))
-    except KeyboardInterrupt:
-        print("\nstopped: the unit was told to stop and the recording was closed", file=sys.stderr)
+        await run_feet(runs, session)
     finally:
         status.finish()
         finish_capture(capture, runs)
         if views is not None:
             for note in views.close():
                 notice(note)
+        for run in runs:
+            if run.result.samples_received:
+                print((f"{run.foot}: " if two_feet else "") + link_summary(run))
     return 0

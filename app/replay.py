@@ -108,7 +108,7 @@ def run_replay(opts: ReplayOptions) -> int:
         if isinstance(nav, dict) and not opts.config_is_explicit:
             apply_capture_settings(cfg, nav, f"capture {opts.path.name}")
         break  # one settings set for all feet (they were one session)
-    rate_hz = float(info.units[0].settings.get("rate_hz", 1000.0))
+    rate_of = {u.foot: float(u.settings.get("rate_hz", 1000.0)) for u in info.units}
     windowed = opts.start_s > 0 or math.isfinite(opts.end_s)
     print(
         f"replaying {opts.path} ({', '.join(f'{u.foot}: {u.port}' for u in info.units)}; "
@@ -135,7 +135,7 @@ def run_replay(opts: ReplayOptions) -> int:
     runs: list[FootRun] = []
     links: dict[str, CaptureReplayLink] = {}
     for k, foot in enumerate(feet):
-        run = FootRun(foot, opts.path.name, Navigator(nav_config, rate_hz=rate_hz))
+        run = FootRun(foot, opts.path.name, Navigator(nav_config, rate_hz=rate_of.get(foot, 1000.0)))
         foot_sinks(run, views, status, two_feet=len(feet) > 1, put_timeout_s=0.0 if realtime else REPLAY_PUT_TIMEOUT_S)
         if opts.collect is not None:
             run.sinks.append(opts.collect(foot))

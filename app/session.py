@@ -1,4 +1,11 @@
-"""Session assembly: a unit (serial port or capture replay) -> the pipeline -> sinks, clean shutdown."""
+"""Session assembly: a unit (serial port, BLE, or capture replay) -> the pipeline -> sinks, clean shutdown.
+
+Live units are opened through :class:`device.links.ReconnectingLink`: an unplugged serial unit or a
+dropped BLE connection is reconnected with backoff and its stream resumed while the session, its
+capture and its outputs go on; each interruption is a :class:`device.links.LinkEvent` for the caller
+(``on_link_event``) and is counted in the link's :class:`device.links.LinkHealth`. A port that does not
+exist or is busy when the session starts is still an error at once (no retrying a typo).
+"""
 
 from __future__ import annotations
 
@@ -8,17 +15,22 @@ import dataclasses
 import logging
 from collections.abc import AsyncGenerator, AsyncIterator, Callable, Sequence
 from dataclasses import dataclass
-from typing import cast
+from typing import TYPE_CHECKING, Literal, cast
 
 import numpy as np
 
 from app.status import FootStatus, StatusLine
+from device import links
+from device.links import LinkEvent, ReconnectingLink
 from device.unit import CaptureTap, LinkStats, OpenShoeUnit
 from pipeline.errors import DeviceError
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import Navigator
 from pipeline.runner import NavSink, run_pipeline
 from pipeline.samples import ImuBatch
+
+if TYPE_CHECKING:
+    from device.ble_link import BleBackend
 
 log = logging.getLogger(__name__)
 
@@ -38,6 +50,62 @@ class SerialSessionResult:
     unit_stopped_cleanly: bool = False
     samples_received: int = 0
     """Samples handed to the pipeline (a replay of the capture stops after as many)."""
+    link_health: links.LinkHealth | None = None
+    """Reconnects, stalls and gaps of a live unit's link (None for a replay)."""
+
+
+@dataclass(frozen=True, slots=True)
+class UnitAddress:
+    """Where a live unit is: a serial port, or a BLE unit by advertised name or address.
+
+    Written ``PORT`` (``/dev/ttyACM0``, ``COM3``) or ``ble:NAME|ADDRESS``; ``ble:`` alone (or ``ble``)
+    means the first unit advertising a known UART service.
+    """
+
+    transport: Literal["serial", "ble"]
+    target: str | None
+    """The port (serial), or the BLE name or address (None: the first unit found)."""
+
+    @classmethod
+    def parse(cls, text: str) -> UnitAddress:
+        if text.lower() == "ble":
+            return cls("ble", None)
+        if text[:4].lower() == "ble:":
+            return cls("ble", text[4:].strip() or None)
+        return cls("serial", text)
+
+    def __str__(self) -> str:
+        if self.transport == "serial":
+            return self.target or ""
+        return f"ble:{self.target or ''}"
+
+    @property
+    def description(self) -> str:
+        """For messages: the port, or "BLE unit NAME"."""
+        if self.transport == "serial":
+            return self.target or ""
+        return f"BLE unit {self.target}" if self.target else "the first BLE shoe unit"
+
+
+async def open_unit_link(
+    address: UnitAddress,
+    *,
+    on_event: Callable[[LinkEvent], None] | None = None,
+    capture: CaptureTap | None = None,
+    ble_backend: BleBackend | None = None,
+) -> ReconnectingLink:
+    """Open a reconnecting link to ``address`` (bytes the link writes itself go to ``capture`` too).
+
+    Raises:
+        DeviceError: the port does not exist or is busy, no Bluetooth stack, the BLE unit is not found.
+    """
+    if address.transport == "ble":
+        link = ReconnectingLink.ble(address.target, backend=ble_backend, on_event=on_event, tx_tap=capture)
+    else:
+        assert address.target is not None
+        link = ReconnectingLink.serial(address.target, on_event=on_event, tx_tap=capture)
+    await link.open()
+    return link
 
 
 class LinkHealth:
@@ -47,10 +115,17 @@ class LinkHealth:
     Host times come from the batches (in a replay, the captured ones), so replays log the same values.
     """
 
-    def __init__(self, log: Callable[..., None], foot: str, stats: Callable[[], LinkStats] | None = None) -> None:
+    def __init__(
+        self,
+        log: Callable[..., None],
+        foot: str,
+        stats: Callable[[], LinkStats] | None = None,
+        reconnects: Callable[[], int] | None = None,
+    ) -> None:
         self._log = log
         self.foot = foot
         self.stats = stats
+        self.reconnects = reconnects
         self._t_next: float | None = None
         self._n = 0
         self._host0: int | None = None
@@ -72,7 +147,7 @@ class LinkHealth:
             t_s=t_last,
             rate_hz=self._n / span_s if span_s > 0 else float("nan"),
             lost_packets=0 if stats is None else stats.lost_packets,
-            reconnects=int(getattr(stats, "reconnects", 0)),
+            reconnects=0 if self.reconnects is None else self.reconnects(),
         )
         self._n, self._host0 = 0, host1
         self._t_next = t_last + LINK_HEALTH_PERIOD_S
@@ -161,18 +236,61 @@ async def run_serial_session(
     result: SerialSessionResult | None = None,
     capture: CaptureTap | None = None,
     on_open: Callable[[OpenShoeUnit], None] | None = None,
+    on_link_event: Callable[[LinkEvent], None] | None = None,
 ) -> SerialSessionResult:
-    """Open ``port``, start the unit's IMU stream, navigate until the stream ends or the task is
-    cancelled (Ctrl-C), then stop the unit and close the port whatever happened.
+    """:func:`run_device_session` on the serial port ``port``."""
+    return await run_device_session(
+        UnitAddress("serial", port),
+        navigator,
+        sinks,
+        rate_divider_log2=rate_divider_log2,
+        expect_samples=expect_samples,
+        source_done=source_done,
+        on_idle=on_idle,
+        status=status,
+        result=result,
+        capture=capture,
+        on_open=on_open,
+        on_link_event=on_link_event,
+    )
+
+
+async def run_device_session(
+    address: UnitAddress,
+    navigator: Navigator,
+    sinks: Sequence[NavSink],
+    *,
+    rate_divider_log2: int = 0,
+    expect_samples: int | None = None,
+    source_done: Callable[[], bool] = lambda: False,
+    on_idle: Callable[[float], None] | None = None,
+    status: StatusLine | FootStatus | None = None,
+    result: SerialSessionResult | None = None,
+    capture: CaptureTap | None = None,
+    on_open: Callable[[OpenShoeUnit], None] | None = None,
+    on_link_event: Callable[[LinkEvent], None] | None = None,
+    ble_backend: BleBackend | None = None,
+) -> SerialSessionResult:
+    """Open the unit at ``address`` through a :class:`~device.links.ReconnectingLink`, start its IMU
+    stream, navigate until the stream ends or the task is cancelled (Ctrl-C), then stop the unit and
+    close the link whatever happened.
+
+    An unplugged unit or a dropped BLE connection is reconnected with backoff and its stream resumed
+    (the learned start command is sent again); the session waits meanwhile and carries on. Every
+    :class:`~device.links.LinkEvent` goes to ``on_link_event``; the counts are in
+    ``result.link_health``, and the status line shows the reconnects.
 
     ``result`` (optional) is filled in as the session goes, so an interrupted session still has one.
-    ``capture`` sees every byte read and written (the capture file); ``on_open`` is called with the
-    unit once the port is open.
+    ``capture`` sees every byte read and written (the capture file), including the start commands the
+    link re-sends on its own; ``on_open`` is called with the unit once the link is open;
+    ``ble_backend``: the bleak backend for BLE units (None: the platform's; tests pass bumble's).
 
     Raises:
-        DeviceError: the port cannot be opened, the unit does not answer, or it was unplugged.
+        DeviceError: the port does not exist or is busy, no Bluetooth stack, the unit is not found or
+            does not answer the start command.
     """
-    unit = await OpenShoeUnit.open_serial(port, capture=capture)
+    link = await open_unit_link(address, on_event=on_link_event, capture=capture, ble_backend=ble_backend)
+    unit = OpenShoeUnit(link, capture=capture)
     if on_open is not None:
         on_open(unit)
     return await run_unit_session(
@@ -214,11 +332,19 @@ async def run_unit_session(
     def keep_last(nav: NavBatch) -> None:
         result.last_nav = nav
 
+    link = unit.link if isinstance(unit.link, ReconnectingLink) else None
+
     def idle(seconds: float) -> None:
+        if link is not None and link.health.gaps and link.health.gaps[-1].end_ns is None:
+            return  # the link reports its own gaps (stall, disconnect, reconnect)
         log.warning("no data from %s for %.1f s", name, seconds)
 
     if status is not None:
         status.lost_packets = lambda: unit.stats.lost_packets
+    if link is not None:
+        result.link_health = link.health
+        if status is not None:
+            status.reconnects = lambda: link.health.reconnects
     try:
         if start:
             await unit.start_imu_stream(rate_divider_log2)

@@ -112,6 +112,14 @@ class StatusLine:
     def lost_packets(self, source: Callable[[], int] | None) -> None:
         self._first.lost_packets = source
 
+    @property
+    def reconnects(self) -> Callable[[], int] | None:
+        return self._first.reconnects
+
+    @reconnects.setter
+    def reconnects(self, source: Callable[[], int] | None) -> None:
+        self._first.reconnects = source
+
     def maybe_draw(self) -> None:
         now = time.monotonic()
         if now - self._last_draw >= self.period_s:
@@ -133,9 +141,12 @@ class StatusLine:
         self._drawn = True
 
     def finish(self) -> None:
-        """End the in-place line so later output starts on a fresh line."""
-        if self.tty and self.samples:
-            self.draw()
+        """Draw the final figures; on a terminal, end the in-place line so later output starts on a
+        fresh line."""
+        if not self.samples:
+            return
+        self.draw()
+        if self.tty:
             self.stream.write("\n")
             self.stream.flush()
 

@@ -407,7 +407,7 @@ class BleLink:
     def _on_disconnect(self, _client: Any) -> None:
         if not self._closed:
             self._lost = "the unit disconnected"
-            log.warning("%s disconnected", self._name)
+            log.info("%s disconnected", self._name)  # read() raises it (DeviceError) to the caller
         self._wakeup.set()
 
     async def read(self) -> bytes:

@@ -23,8 +23,15 @@ frames a copy of the stream for the numbers only; the driver still sees every by
 watchdog** notices a unit that stops streaming while the driver is waiting for data: after
 ``idle_timeout_s`` (1 s) it records a stall and re-sends the resume sequence; if the unit stays silent
 for another ``idle_timeout_s`` it forces a reconnect. It only runs while a continuous stream is
-expected (not for stepwise dead reckoning, which may be quiet for seconds while the wearer stands) and
-only while a ``read()`` is pending, so a slow consumer is never mistaken for a silent unit.
+expected (not for stepwise dead reckoning, which may be quiet for seconds while the wearer stands),
+only once the unit has sent data since the driver's last start command (a unit that never answers the
+start is the driver's time-out to report, not a stall), and only while a ``read()`` is pending, so a
+slow consumer is never mistaken for a silent unit.
+
+Events (:class:`LinkEvent`, to ``on_event``): ``disconnected`` / ``stalled`` when a gap opens,
+``reconnected`` when a new inner link is up, ``resumed`` when data flows again (emitted once the first
+data packet after the gap is framed, so :attr:`LinkGap.packets_missing` is known by then, or when the
+next gap opens first), ``gave_up``.
 """
 
 from __future__ import annotations
@@ -216,6 +223,8 @@ class ReconnectingLink:
         self._gap: LinkGap | None = None  # open: waiting for data / its first packet
         self._stalled = False
         self._nudged_ns = 0
+        self._streamed = False  # data packets since the driver's last start command
+        self._unreported: LinkGap | None = None  # data came back; "resumed" not emitted yet
 
     # --- construction helpers ---------------------------------------------------------------------
 
@@ -403,6 +412,7 @@ class ReconnectingLink:
                     self._desired.pop(key, None)
                 else:
                     self._desired[key] = bytes(cmd)
+                    self._streamed = False
                 self._continuous = any(k[0] in _CONTINUOUS_STARTS for k in self._desired)
             else:
                 only_state = False
@@ -415,7 +425,7 @@ class ReconnectingLink:
         if gap is not None and gap.end_ns is None:
             gap.end_ns = now
             self._stalled = False
-            self._emit("resumed", f"data from {self._name} again after {gap.duration_s:.2f} s", gap)
+            self._unreported = gap
         for frame in self._framer.feed(data):
             if type(frame) is DataPacket:
                 if gap is not None and gap.first_packet_after is None:
@@ -423,9 +433,21 @@ class ReconnectingLink:
                     self._gap = gap = None
                 self._last_number = frame.number
                 self._packet_len = len(frame.payload) + 6
+                self._streamed = True
+        unreported = self._unreported
+        if unreported is not None and unreported.first_packet_after is not None:
+            self._report_resumed()
+
+    def _report_resumed(self) -> None:
+        gap, self._unreported = self._unreported, None
+        if gap is None:
+            return
+        missing = "" if gap.packets_missing is None else f", {gap.packets_missing} packets missing"
+        self._emit("resumed", f"data from {self._name} again after {gap.duration_s:.2f} s{missing}", gap)
 
     def _open_gap(self, reason: str) -> LinkGap:
         now = time.monotonic_ns()
+        self._report_resumed()  # data had come back, but no packet before this new gap
         gap = self._gap
         if gap is None or gap.end_ns is not None:
             if gap is not None:
@@ -517,7 +539,7 @@ class ReconnectingLink:
             await asyncio.sleep(min(0.1, timeout / 4))
             link = self._link
             reading = self._reading_since_ns
-            if link is None or reading is None or not self._continuous:
+            if link is None or reading is None or not self._continuous or not self._streamed:
                 continue
             now = time.monotonic_ns()
             silent_ns = now - max(self._last_rx_ns, reading, self._nudged_ns)

@@ -11,15 +11,16 @@ import asyncio
 import contextlib
 import math
 import sys
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pytest
 from bleak import BleakClient, BleakScanner
 from bumble.link import LocalLink
 
-from device import ble_link, discovery
+from device import ble_link, discovery, protocol
 from device.ble_link import BleBackend, BleLink
 from device.emulator.ble_backend import BumbleAdapter, BumbleClient, BumbleScanner, bumble_backend
 from device.emulator.ble_peripheral import BleShoePeripheral, Profile, link_budget_bps
@@ -293,3 +294,108 @@ async def test_scan_lists_ble_units_by_service(radio: Radio) -> None:
         ("FOOT-R", "Nordic UART"),
     ]
     assert report.serial == ()
+
+
+async def test_stepwise_dead_reckoning_over_ble_acks_resends_and_dedup_give_the_emulated_track(
+    radio: Radio,
+) -> None:
+    """SWDR through bleak's public API: every packet ACKed (resends too), each package number applied
+    once, the track equal to the emulator's step sums."""
+    from device.emulator.gait import simulate_walk
+    from device.emulator.scripts import steps_from_truth, yaw_from_quat_wxyz
+    from device.stepwise import StepBatch
+    from device.unit import StepwiseMode
+
+    walk = simulate_walk("rectangle", 25.0, seed=1)
+    steps = steps_from_truth(walk.t_s, walk.pos_n_m, yaw_from_quat_wxyz(walk.quat_nb_wxyz), walk.stance)
+    n = len(steps)
+    # Resend at every connection event (7.5 ms emulated): the host's ACK takes longer than that to come
+    # back over the emulated radio, so most packets arrive more than once.
+    p = BleShoePeripheral(
+        radio.link, walk.t_s, walk.acc_b_mps2, walk.gyr_b_radps, name="FOOT-L", speed=math.inf,
+        steps=steps, resend_interval_s=0.005,
+    )  # fmt: skip
+    await p.start()
+    try:
+        async with BleLink("FOOT-L", backend=radio.backend(23)) as link:
+            unit = OpenShoeUnit(link)
+            await unit.start(StepwiseMode())
+            got: list[StepBatch] = []
+            async with asyncio.timeout(30), contextlib.aclosing(unit.batches()) as stream:
+                async for batch in stream:
+                    if isinstance(batch, StepBatch):
+                        got.append(batch)
+                        if int(batch.counter[-1]) >= n:
+                            break
+            assert await unit.stop()
+            stats, tracker = unit.stats, unit.steps
+        fw = p.firmware
+        assert fw.acked_numbers == list(range(1, n + 1))  # every packet ACKed with its exact number
+        resends = fw.resends
+    finally:
+        await p.stop()
+    counter = np.concatenate([b.counter for b in got])
+    np.testing.assert_array_equal(counter, np.arange(1, n + 1))  # each package number applied once
+    np.testing.assert_allclose(np.concatenate([b.pos_n_m for b in got]), steps.pos_n_m, atol=3e-3)
+    np.testing.assert_allclose(np.concatenate([b.heading_rad for b in got]), steps.heading_rad, atol=1e-5)
+    assert stats.duplicates == resends > n  # every resend arrived and was dropped as a repeat
+    assert tracker.repeats_ignored == 0
+    assert stats.acks_sent == stats.packets  # resends ACKed too
+    assert stats.lost_packets == 0 and stats.checksum_errors == 0
+    np.testing.assert_allclose(tracker.pos_n_m, steps.pos_n_m[-1], atol=3e-3)
+    still = int(np.count_nonzero(np.linalg.norm(steps.dx_m, axis=1) < 0.05))
+    assert (tracker.stationary, tracker.steps) == (still, n - still)
+
+
+async def test_live_over_ble_at_250_hz_carries_on_through_a_disconnect(radio: Radio, tmp_path: Path) -> None:
+    """``footnav live --ble FOOT-L`` in-process, with bumble's backend injected through the test-only
+    ``LiveOptions.ble_backend``: 250 Hz by default over BLE, a drop reconnected and recorded."""
+    from app.config import CLI, defaults
+    from app.live import LiveOptions, live_session
+    from device.capture import read_capture_info, summarize_capture
+    from device.emulator.gait import simulate_walk
+    from pipeline.nav_types import NavBatch
+
+    walk = simulate_walk("rectangle", 16.0, seed=1)
+    navigated: list[NavBatch] = []
+    cfg = defaults()
+    cfg.set("session.sessions_dir", str(tmp_path), CLI)
+    opts = LiveOptions(
+        ports={"foot": "ble:FOOT-L"},
+        config=cfg,
+        viewer=False,
+        ble_backend=radio.backend(23),
+        collect=lambda _foot: navigated.append,
+    )
+
+    def samples() -> int:
+        return sum(len(b) for b in navigated)
+
+    async def until(condition: Callable[[], bool], timeout_s: float) -> None:
+        async with asyncio.timeout(timeout_s):
+            while not condition():
+                await asyncio.sleep(0.02)
+
+    p = BleShoePeripheral(radio.link, walk.t_s, walk.acc_b_mps2, walk.gyr_b_radps, name="FOOT-L", speed=4.0)
+    await p.start()
+    try:
+        task = asyncio.create_task(live_session(opts))
+        await until(lambda: samples() >= 500 or task.done(), 20)
+        await p.disconnect()  # the unit keeps streaming; the module drops bytes until the host is back
+        await until(lambda: (p.stats.connections == 2 and samples() >= 1500) or task.done(), 20)
+        task.cancel()  # Ctrl-C
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+    finally:
+        await p.stop()
+    # The start at rate divider 2 (250 Hz), then the same start again from the link on reconnect.
+    start = (protocol.CMD_NORMAL_IMU, bytes([protocol.imu_mode_byte(2)]))
+    assert [(c.cmd_id, c.payload) for c in p.commands if c.cmd_id == protocol.CMD_NORMAL_IMU] == [start] * 2
+    assert p.stats.packets_dropped_overflow == 0  # 250 Hz fits MTU 23
+    t = np.concatenate([b.t_s for b in navigated])
+    assert np.median(np.diff(t)) == pytest.approx(0.004)  # navigated at 250 Hz
+    (capture,) = tmp_path.glob("live-*.mcap")
+    (unit,) = read_capture_info(capture).units
+    assert (unit.transport, unit.port, unit.settings["rate_hz"]) == ("ble", "ble:FOOT-L", 250.0)
+    events = summarize_capture(capture).events["foot"]
+    assert [e["kind"] for e in events if e["event"] == "link"] == ["disconnected", "reconnected", "resumed"]

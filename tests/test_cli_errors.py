@@ -14,9 +14,12 @@ import pytest
 
 from device.emulator.pty_server import PtyShoeServer
 
+NO_BLUETOOTH = {"DBUS_SYSTEM_BUS_ADDRESS": "unix:path=/nonexistent/footnav-test-bus"}
+"""Forces bleak's BlueZ backend onto a system bus that is not there: no Bluetooth stack."""
 
-def _footnav(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "DISPLAY": "", "WAYLAND_DISPLAY": ""}
+
+def _footnav(*args: str, timeout: float = 60, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "DISPLAY": "", "WAYLAND_DISPLAY": "", **(env or {})}
     return subprocess.run(
         [sys.executable, "-m", "app", *args],
         capture_output=True,
@@ -63,9 +66,34 @@ def test_silent_unit(tmp_path: Path) -> None:
         os.close(master)
         os.close(slave)
     _assert_one_line_error(proc, "no answer", "start command")
+    # Never having streamed, the unit is the start command's time-out to report, not a stall to restart.
+    assert "stopped streaming" not in proc.stderr and "reconnecting" not in proc.stderr
 
 
 @pytest.mark.parametrize("args", [["demo", "--duration", "-3"], ["demo", "--path", "moon"]])
 def test_bad_arguments_are_usage_errors(args: list[str]) -> None:
     proc = _footnav(*args)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr and "usage:" in proc.stderr
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="forces the no-D-Bus path of bleak's BlueZ backend")
+def test_live_over_ble_without_a_bluetooth_stack_is_one_line(tmp_path: Path) -> None:
+    proc = _footnav("live", "--ble", "FOOT-L", "--no-viewer", "--sessions", str(tmp_path), env=NO_BLUETOOTH)
+    _assert_one_line_error(proc, "no Bluetooth stack available", "BlueZ")
+    assert "1 kHz over BLE" not in proc.stderr  # 250 Hz is the BLE default
+    proc = _footnav("live", "--ble", "FOOT-L", "--rate-divider", "0", "--no-viewer", "--sessions", str(tmp_path),
+                    env=NO_BLUETOOTH)  # fmt: skip
+    _assert_one_line_error(proc, "no Bluetooth stack available")
+    assert "footnav: warning: 1 kHz over BLE" in proc.stderr  # asked for explicitly: allowed, with a warning
+    assert not list(tmp_path.glob("*.mcap"))  # no unit ever answered: no capture left behind
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="forces the no-D-Bus path of bleak's BlueZ backend")
+def test_scan_without_a_bluetooth_stack_says_so_and_lists_serial_ports() -> None:
+    proc = _footnav("scan", "--timeout", "0.5", env=NO_BLUETOOTH)
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    lines = proc.stdout.splitlines()
+    ble = [line for line in lines if line.startswith("ble ")]
+    assert len(ble) == 1 and ble[0].split(None, 1)[1].startswith("no Bluetooth stack available"), proc.stdout
+    assert any(line.startswith("serial ") for line in lines)  # the serial part is there all the same
