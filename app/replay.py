@@ -69,7 +69,7 @@ class ReplayOptions:
     Attributes:
         speed: 1.0 = as captured, N = N times faster, ``math.inf`` = as fast as possible.
         start_s, end_s: window in session seconds (device time since the first sample, the
-            recording's ``imu_time``); whole read batches around the edges are kept.
+            recording's ``imu_time``), exact to the sample.
         collect: tests: an extra NavSink per foot.
     """
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 from app.status import FootStatus, StatusLine
 from device import links
@@ -34,6 +35,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+LIVE_READ_INTERVAL_S = 0.005  # coalesce reads: about 5 packets a batch at 1 kHz (see OpenShoeUnit)
 IDLE_NOTICE_S = 1.0  # a unit that stops streaming is noticed within this long
 LINK_HEALTH_PERIOD_S = 0.5
 """Link health (rate, loss, reconnects) is logged every this much device time."""
@@ -168,7 +170,7 @@ async def _session_samples(
     ``expect_samples`` or when ``source_done()`` and the link has gone quiet.
 
     ``host_clock`` maps the driver's host stamp of a batch to another (a replay's captured time).
-    ``window = (start, end)`` in session seconds: whole batches before ``start`` are decoded but not
+    ``window = (start, end)`` in session seconds: samples outside it are decoded but not
     passed on (``on_window()`` is called at the first one passed on), the stream ends after ``end``."""
     in_window = window is None
     received = 0
@@ -213,14 +215,32 @@ async def _session_samples(
                         in_window = True
                         if on_window is not None:
                             on_window()
+                batch = dataclasses.replace(batch, t_s=batch.t_s - result.device_t0_s)
+                if window is not None:  # trim to the window to the sample, whatever the batching
+                    keep = (batch.t_s >= window[0]) & (batch.t_s <= window[1])
+                    if not keep.all():
+                        if not keep.any():
+                            continue
+                        batch = _select(batch, keep)
                 received += len(batch)
                 result.samples_received = received
-                yield dataclasses.replace(batch, t_s=batch.t_s - result.device_t0_s)
+                yield batch
         finally:
             if pending is not None and not pending.done():
                 pending.cancel()
                 with contextlib.suppress(asyncio.CancelledError, StopAsyncIteration):
                     await pending
+
+
+def _select(batch: ImuBatch, keep: NDArray[np.bool_]) -> ImuBatch:
+    """The samples of ``batch`` where ``keep`` is True."""
+    return ImuBatch(
+        t_s=batch.t_s[keep],
+        acc_b_mps2=batch.acc_b_mps2[keep],
+        gyr_b_radps=batch.gyr_b_radps[keep],
+        counter=batch.counter[keep],
+        host_ns=batch.host_ns[keep],
+    )
 
 
 async def run_serial_session(
@@ -290,7 +310,7 @@ async def run_device_session(
             does not answer the start command.
     """
     link = await open_unit_link(address, on_event=on_link_event, capture=capture, ble_backend=ble_backend)
-    unit = OpenShoeUnit(link, capture=capture)
+    unit = OpenShoeUnit(link, capture=capture, read_interval_s=LIVE_READ_INTERVAL_S)
     if on_open is not None:
         on_open(unit)
     return await run_unit_session(

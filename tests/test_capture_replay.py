@@ -88,10 +88,10 @@ def test_two_feet_capture_replays_both(tmp_path: Path) -> None:
     again = replay(path)
     for foot in ("left", "right"):
         assert_identical(live[foot], again[foot])
-    # the window is in session seconds (whole read batches around 1..8 s); navigation aligns on the
-    # still start, which the window still holds (mid-walk the foot never rests the 0.5 s it needs)
+    # the window is in session seconds, exact to the sample; navigation aligns on the still start,
+    # which the window still holds (mid-walk the foot never rests the 0.5 s it needs)
     part = replay(path, start_s=1.0, end_s=8.0)["left"]
-    assert 0.5 < part.t_s[0] < 1.5 and 7.5 < part.t_s[-1] < 8.5
+    assert 1.0 <= part.t_s[0] < 1.002 and 7.998 < part.t_s[-1] <= 8.0
 
 
 def test_capture_holds_both_directions_and_header(tmp_path: Path) -> None:

@@ -74,7 +74,7 @@ def test_two_feet_for_ten_minutes_in_one_recording(tmp_path: Path) -> None:
         assert rows[f"/world/{foot}/track"] == rows[f"/world/truth/{foot}"] == 600_000
         assert rows[f"/plots/stance/{foot}"] == 600_000
         assert 900 < rows[f"/world/{foot}/steps"] == rows[f"/world/{foot}/step_cov"]
-        assert rows[f"/plots/rate/{foot}"] > 1000 and rows[f"/world/{foot}/line"] >= 2
+        assert rows[f"/plots/rate/{foot}"] > 300 and rows[f"/world/{foot}/line"] >= 2  # see the 20 s test
     (capture,) = tmp_path.glob("*.mcap")
     assert read_capture_info(capture).feet == ("left", "right")
 
@@ -112,7 +112,9 @@ def test_recording_read_back_of_every_view(demo20: Path) -> None:
     assert last.shape[0] >= 50 and d.max() < 1e-5
     # link health and the detector threshold next to its statistic
     rate = _rows(store, "/plots/rate/foot")
-    assert rate.num_rows >= 30
+    # one point per batch at most every 0.5 s of device time; at --pace max the reader coalesces the
+    # emulator's backlog into batches of up to about a second, so 20 s give at least ~15 points
+    assert rate.num_rows >= 15
     errors = _flat(_rows(store, "/plots/link_errors/foot"), "/plots/link_errors/foot:Scalars:scalars")
     assert np.all(errors == 0)
     det = _flat(_rows(store, "/plots/detector/foot"), "/plots/detector/foot:Scalars:scalars").reshape(-1, 2)

@@ -35,6 +35,9 @@ from views.paths import DEFAULT_FOOT, EVENTS, FootPaths
 
 log = logging.getLogger(__name__)
 
+_STALLED_RECORDINGS: list[rr.RecordingStream] = []
+"""Streams whose sink stalled on close; never released (see ``RerunLogger.close``)."""
+
 APPLICATION_ID = "footnav"
 FLUSH_PERIOD_S = 0.1
 MAX_ROWS_PER_SEND = 20_000
@@ -270,6 +273,10 @@ class RerunLogger:
         self._thread.join(timeout_s)
         if self._thread.is_alive():
             log.error("Rerun logger did not finish within %.1f s; a sink may be stalled", timeout_s)
+            # Once unreferenced, the SDK would sweep this "orphaned" stream from whichever thread
+            # next deletes any RecordingStream, and disconnecting a sink that cannot deliver blocks
+            # that thread for good. Keeping a reference keeps it out of the sweep.
+            _STALLED_RECORDINGS.append(self.recording)
             return False
         return True
 
