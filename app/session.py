@@ -18,7 +18,6 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal, cast
 
 import numpy as np
-from numpy.typing import NDArray
 
 from app.status import FootStatus, StatusLine
 from device import links
@@ -221,7 +220,7 @@ async def _session_samples(
                     if not keep.all():
                         if not keep.any():
                             continue
-                        batch = _select(batch, keep)
+                        batch = batch.select(keep)
                 received += len(batch)
                 result.samples_received = received
                 yield batch
@@ -230,17 +229,6 @@ async def _session_samples(
                 pending.cancel()
                 with contextlib.suppress(asyncio.CancelledError, StopAsyncIteration):
                     await pending
-
-
-def _select(batch: ImuBatch, keep: NDArray[np.bool_]) -> ImuBatch:
-    """The samples of ``batch`` where ``keep`` is True."""
-    return ImuBatch(
-        t_s=batch.t_s[keep],
-        acc_b_mps2=batch.acc_b_mps2[keep],
-        gyr_b_radps=batch.gyr_b_radps[keep],
-        counter=batch.counter[keep],
-        host_ns=batch.host_ns[keep],
-    )
 
 
 async def run_serial_session(

@@ -155,7 +155,7 @@ class Navigator:
                 drop = len(batch) - keep
                 self.stats.samples_before_alignment += drop
                 batch, stat, threshold, still = (
-                    _tail(batch, drop),
+                    batch.select(slice(drop, None)),
                     stat[drop:],
                     threshold[drop:],
                     still[drop:],
@@ -183,7 +183,7 @@ class Navigator:
         self._par = filter_parameters(prof, self.rate_hz, al.gravity_mps2, cfg.dt_max_s)
         self.stats.aligned_at_s = float(batch.t_s[start])
         self._t_last = float(batch.t_s[start]) - 1.0 / self.rate_hz  # one nominal interval before
-        rest = _tail(batch, start)
+        rest = batch.select(slice(start, None))
         return self._run(rest, stat[start:], threshold[start:], still[start:])
 
     def _quiet(self, batch: ImuBatch) -> NDArray[np.bool_]:
@@ -230,19 +230,33 @@ class Navigator:
         s.bad_samples, s.zero_velocity_updates = int(c[eskf.CNT_BAD_SAMPLE]), int(c[eskf.CNT_UPDATES])
         s.zero_rate_updates, s.zero_rate_rejected = int(c[eskf.CNT_ZARU]), int(c[eskf.CNT_ZARU_REJECTED])
         s.samples_out += n
-        return NavBatch(
-            t_s=batch.t_s,
-            pos_n_m=pos,
-            vel_n_mps=vel,
-            quat_nb_wxyz=quat,
-            pos_cov_n_m2=cov[:, :3, :3],
-            stance=still,
-            detector_stat=stat,
-            detector_threshold=threshold,
-            clearance_m=pos[:, 2].copy(),
-            host_ns=batch.host_ns,
-            cov_pos_yaw=cov,
-        )
+        return nav_batch(batch, pos, vel, quat, cov, stat, threshold, still)
+
+
+def nav_batch(
+    batch: ImuBatch,
+    pos: F64,
+    vel: F64,
+    quat: F64,
+    cov_pos_yaw: F64,
+    stat: F64,
+    threshold: F64,
+    still: NDArray[np.bool_],
+) -> NavBatch:
+    """The :class:`NavBatch` of ``batch``'s samples from the filter's per-sample outputs."""
+    return NavBatch(
+        t_s=batch.t_s,
+        pos_n_m=pos,
+        vel_n_mps=vel,
+        quat_nb_wxyz=quat,
+        pos_cov_n_m2=cov_pos_yaw[:, :3, :3],
+        stance=still,
+        detector_stat=stat,
+        detector_threshold=threshold,
+        clearance_m=pos[:, 2].copy(),
+        host_ns=batch.host_ns,
+        cov_pos_yaw=cov_pos_yaw,
+    )
 
 
 def _first_run(mask: NDArray[np.bool_], length: int) -> int:
@@ -255,15 +269,6 @@ def _first_run(mask: NDArray[np.bool_], length: int) -> int:
     hits = np.flatnonzero(run == length)
     return int(hits[0]) if hits.size else -1
 
-
-def _tail(batch: ImuBatch, start: int) -> ImuBatch:
-    return ImuBatch(
-        t_s=batch.t_s[start:],
-        acc_b_mps2=batch.acc_b_mps2[start:],
-        gyr_b_radps=batch.gyr_b_radps[start:],
-        counter=batch.counter[start:],
-        host_ns=batch.host_ns[start:],
-    )
 
 
 def navigate(

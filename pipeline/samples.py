@@ -31,6 +31,16 @@ class ImuBatch:
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
 
+    def select(self, index: slice | NDArray[np.bool_]) -> ImuBatch:
+        """The samples at ``index`` (a slice or a boolean mask), as a batch."""
+        return ImuBatch(
+            t_s=self.t_s[index],
+            acc_b_mps2=self.acc_b_mps2[index],
+            gyr_b_radps=self.gyr_b_radps[index],
+            counter=self.counter[index],
+            host_ns=self.host_ns[index],
+        )
+
     @staticmethod
     def concat(batches: list[ImuBatch]) -> ImuBatch:
         """Join batches in order into one."""

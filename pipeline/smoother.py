@@ -67,7 +67,7 @@ from numpy.typing import NDArray
 from pipeline import eskf
 from pipeline.eskf import BA0, BG0, N_CNT, N_STATE, P0, TH0, V0, _correct, _predict
 from pipeline.nav_types import NavBatch
-from pipeline.navigator import NavConfig, Navigator, NavStats
+from pipeline.navigator import NavConfig, Navigator, NavStats, nav_batch
 from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s
 from pipeline.samples import ImuBatch
 
@@ -352,24 +352,9 @@ class _CheckpointingNavigator(Navigator):
         for a in range(0, n, seg):
             b = min(n, a + seg)
             self.checkpoints.append((offset + a, self._x.copy(), self._P.copy(), self._t_last))
-            part = ImuBatch(
-                batch.t_s[a:b], batch.acc_b_mps2[a:b], batch.gyr_b_radps[a:b], batch.counter[a:b], batch.host_ns[a:b]
-            )
-            out = super()._run(part, stat[a:b], threshold[a:b], still[a:b])
+            out = super()._run(batch.select(slice(a, b)), stat[a:b], threshold[a:b], still[a:b])
             pos[a:b], vel[a:b], quat[a:b], cov[a:b] = out.pos_n_m, out.vel_n_mps, out.quat_nb_wxyz, out.cov_pos_yaw
-        return NavBatch(
-            t_s=batch.t_s,
-            pos_n_m=pos,
-            vel_n_mps=vel,
-            quat_nb_wxyz=quat,
-            pos_cov_n_m2=cov[:, :3, :3],
-            stance=still,
-            detector_stat=stat,
-            detector_threshold=threshold,
-            clearance_m=pos[:, 2].copy(),
-            host_ns=batch.host_ns,
-            cov_pos_yaw=cov,
-        )
+        return nav_batch(batch, pos, vel, quat, cov, stat, threshold, still)
 
 
 def smooth_recording(
