@@ -150,6 +150,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     evaluate.add_argument("--smooth", action="store_true", help="evaluate the smoothed (non-causal) solution")
 
+    from app.experiments import add_experiment_parsers
+
+    add_experiment_parsers(sub)
+
     config = sub.add_parser("config", help="show the effective configuration and where each value came from")
     _add_config_args(config)
     config.add_argument("--rate-divider", type=int, default=None, choices=range(7), metavar="K")
@@ -335,6 +339,10 @@ def main(argv: list[str] | None = None) -> int:
             return _export(args)
         if args.command == "evaluate":
             return _evaluate(args)
+        if args.command == "experiment":
+            from app.experiments import run_experiment
+
+            return run_experiment(args)
     except FootnavError as exc:
         print(f"footnav: error: {exc}", file=sys.stderr)
         return 2
