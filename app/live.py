@@ -246,9 +246,10 @@ def finish_capture(capture: CaptureWriter | None, runs: Sequence[FootRun]) -> No
         capture.path.unlink(missing_ok=True)
         return
     mb = capture.path.stat().st_size / 1e6
+    stopped = f"; STOPPED EARLY: {capture.error.strerror or capture.error}" if capture.error else ""
     print(
         f"capture: {capture.path} ({mb:.1f} MB, {capture.messages} reads/writes, "
-        f"{capture.write_seconds:.2f} s spent writing)",
+        f"{capture.write_seconds:.2f} s spent writing{stopped})",
         file=sys.stderr,
     )
 

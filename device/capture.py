@@ -31,6 +31,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import struct
 import threading
 import time
@@ -46,6 +47,8 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from pipeline.errors import InputFormatError
+
+log = logging.getLogger(__name__)
 
 FORMAT_VERSION: Final = 1
 PROFILE: Final = "footnav"
@@ -143,6 +146,8 @@ class CaptureWriter:
         self._sequence = 0
         self._dirty = False
         self._closed = False
+        self.error: OSError | None = None
+        """Why writing stopped (disk full, file too large, device gone), or None."""
         self.messages = 0
         self.bytes_captured = 0
         self.rx_bytes = 0
@@ -194,12 +199,16 @@ class CaptureWriter:
     def _add(self, channel: int, host_ns: int, data: bytes) -> None:
         t0 = time.perf_counter()
         with self._lock:
-            if self._closed:
+            if self._closed or self.error is not None:
                 return
             self._sequence += 1
-            self._writer.add_message(
-                channel, host_ns + self._mono_to_wall_ns, data, host_ns, sequence=self._sequence
-            )
+            try:
+                self._writer.add_message(
+                    channel, host_ns + self._mono_to_wall_ns, data, host_ns, sequence=self._sequence
+                )
+            except OSError as exc:  # the chunk was full and could not be written
+                self._fail(exc)
+                return
             self._dirty = True
         self.messages += 1
         self.bytes_captured += len(data)
@@ -209,17 +218,35 @@ class CaptureWriter:
         """Close the current chunk and hand it to the OS (what survives a ``kill -9``)."""
         t0 = time.perf_counter()
         with self._lock:
-            if self._closed or not self._dirty:
+            if self._closed or not self._dirty or self.error is not None:
                 return
-            self._writer.flush()
+            try:
+                self._writer.flush()
+            except OSError as exc:
+                self._fail(exc)
+                return
             self._dirty = False
         self.write_seconds += time.perf_counter() - t0
 
+    def _fail(self, exc: OSError) -> None:
+        """Stop capturing for good (the lock is held): the file keeps every chunk written before.
+
+        Nothing more is buffered (memory stays bounded); the session goes on without capture.
+        """
+        self.error = exc
+        with contextlib.suppress(OSError):
+            self._file.close()
+        log.error(
+            "capture stopped: %s writing %s; what was written before stays readable "
+            "(`footnav replay` reads it up to there); the session goes on without capture",
+            exc.strerror or exc,
+            self.path,
+        )
+
     def _flush_loop(self) -> None:
         while not self._stop.wait(self._period):
-            try:
-                self.flush()
-            except OSError:  # disk full etc.: keep the session going, say it once at close
+            self.flush()
+            if self.error is not None:
                 return
 
     def close(self) -> None:
@@ -231,8 +258,12 @@ class CaptureWriter:
             if self._closed:
                 return
             self._closed = True
+            if self.error is not None:
+                return
             try:
                 self._writer.finish()
+            except OSError as exc:
+                self._fail(exc)
             finally:
                 self._file.close()
 

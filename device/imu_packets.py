@@ -131,42 +131,78 @@ class TickUnwrapper:
 
 
 class CounterTracker:
-    """Unwraps the uint16 package number and counts lost packets, duplicates and backward steps.
+    """Unwraps the uint16 package number and accounts for every number: received, lost, repeated, late.
 
-    A step of +1 is normal; 0 is a duplicate (a lossless-mode resend); +2..+32767 means that many
-    minus one packets were lost; a step that is negative modulo 2**16 (-32768..-1) is counted as
-    ``out_of_order``. The unwrapped counter follows the signed step.
+    Each step is taken as a signed difference modulo 2**16, so the unwrapped counter is right across
+    wraps, gaps of under 32768 packets, repeats and packets that arrive after their successors. The
+    accounting keeps the highest number seen and the set of numbers below it not yet received
+    (within ``window`` of it): a number above the highest opens a gap (``lost`` grows by its size);
+    a missing number arriving late closes its place in the gap (``lost`` shrinks, ``out_of_order``
+    grows); a number already received is a duplicate (a lossless-mode resend, or a repeat on the
+    wire). Gaps that fall more than ``window`` behind the highest number stay lost for good.
+    A stream of consecutive numbers takes one vectorised comparison, no per-packet work.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, window: int = 4096) -> None:
+        self._window = window
         self._last_raw: int | None = None
         self._last_total = 0
+        self._high = 0
+        self._missing: set[int] = set()
+        self._expired = 0
         self.lost = 0
+        """Numbers below the highest one received that have not arrived (yet)."""
         self.duplicates = 0
+        """Arrivals of a number already received."""
         self.out_of_order = 0
+        """Numbers that arrived after a higher one (they filled a gap)."""
 
     def update(self, numbers: NDArray[np.integer]) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-        """Track the next package numbers (n,).
+        """Track the next package numbers (n,), in arrival order.
 
         Returns:
-            (unwrapped counters (n,) int64, duplicate mask (n,) — True where the step was 0).
+            (unwrapped counters (n,) int64, duplicate mask (n,): True where the number had been
+            received before).
         """
         raw = np.asarray(numbers, dtype=np.int64)
+        dup = np.zeros(raw.size, dtype=np.bool_)
         if raw.size == 0:
-            return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.bool_)
-        first = self._last_raw is None
-        prev = int(raw[0]) - 1 if self._last_raw is None else self._last_raw
-        if first:
-            self._last_total = int(raw[0]) - 1
-        steps = (np.diff(raw, prepend=prev) + COUNTER_WRAP // 2) % COUNTER_WRAP - COUNTER_WRAP // 2
-        dup = steps == 0
-        self.duplicates += int(np.count_nonzero(dup))
-        self.lost += int(np.sum(steps[steps > 1] - 1))
-        self.out_of_order += int(np.count_nonzero(steps < 0))
+            return np.empty(0, dtype=np.int64), dup
+        if self._last_raw is None:
+            self._last_raw = int(raw[0]) - 1
+            self._last_total = self._high = int(raw[0]) - 1
+        steps = (np.diff(raw, prepend=self._last_raw) + COUNTER_WRAP // 2) % COUNTER_WRAP - COUNTER_WRAP // 2
         total = self._last_total + np.cumsum(steps)
         self._last_raw = int(raw[-1])
         self._last_total = int(total[-1])
+        if total[0] == self._high + 1 and np.all(steps[1:] == 1):
+            self._high = int(total[-1])
+        else:
+            self._account(total, dup)
+        missing = self._missing
+        if missing and min(missing) < self._high - self._window:
+            old = {m for m in missing if m < self._high - self._window}
+            missing -= old
+            self._expired += len(old)
+        self.lost = self._expired + len(missing)
         return total, dup
+
+    def _account(self, total: NDArray[np.int64], dup: NDArray[np.bool_]) -> None:
+        """The per-packet bookkeeping of a read that is not one consecutive run."""
+        high, missing = self._high, self._missing
+        for i, t in enumerate(total.tolist()):
+            if t > high:
+                first_missing = max(high + 1, t - self._window)
+                self._expired += first_missing - (high + 1)
+                missing.update(range(first_missing, t))
+                high = t
+            elif t in missing:
+                missing.remove(t)
+                self.out_of_order += 1
+            else:
+                dup[i] = True
+                self.duplicates += 1
+        self._high = high
 
 
 def frame_payload_rows(numbers: NDArray[np.integer], rows: NDArray[np.uint8]) -> NDArray[np.uint8]:

@@ -138,11 +138,11 @@ class LinkStats:
     bad_lengths: int
     """Candidate data packets with an impossible length byte."""
     lost_packets: int
-    """Packets missing according to package-number gaps."""
+    """Package numbers below the highest received that never arrived."""
     duplicates: int
-    """Packets that repeated the previous package number (resends; dropped from the batches)."""
+    """Packets whose number had already been received (resends, repeats; dropped from the batches)."""
     out_of_order: int
-    """Package numbers that stepped backwards."""
+    """Packets that arrived after a higher-numbered one (put back in order within their read)."""
     unexpected_packets: int
     """Valid packets of no active kind or of an unknown length (counted, logged once per length)."""
     bytes_received: int
@@ -608,10 +608,14 @@ class OpenShoeUnit:
             await self._ack_data()
         counters, dup = self._counters.update(np.asarray(numbers, dtype=np.int64))
         decoded = _Decoded(host_ns)
-        for i, payload in enumerate(payloads):
+        # packets that arrived after their successors are put back in order within the read (a
+        # late one whose successors went out in an earlier read reaches the estimators late:
+        # they count its time step as bad)
+        order = np.argsort(counters, kind="stable") if np.any(np.diff(counters) < 0) else range(len(payloads))
+        for i in order:
             if dup[i]:
                 continue
-            self._route(decoded, int(counters[i]), numbers[i], payload)
+            self._route(decoded, int(counters[i]), numbers[i], payloads[i])
         return self._build(decoded)
 
     def _route(self, out: _Decoded, counter: int, number: int, payload: bytes) -> None:

@@ -179,3 +179,35 @@ def test_kill_9_leaves_a_readable_capture(tmp_path: Path) -> None:
     assert "end" not in [e.get("event") for e in summary.events.get("foot", [])]
     got = replay(path)["foot"]
     assert len(got) > 2000
+
+
+def _file_size_limit(limit_bytes: int) -> Callable[[], None]:
+    """A child's file size limit: writing past it fails with EFBIG, as a full disk fails with ENOSPC."""
+    import resource
+
+    def apply() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # an error from write(), not a killed process
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+
+    return apply
+
+
+def test_full_disk_stops_the_capture_with_a_message_and_the_session_goes_on(tmp_path: Path) -> None:
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    proc = subprocess.run(
+        [sys.executable, "-m", "app", "demo", "--duration", "20", "--pace", "max", "--no-viewer",
+         "--sessions", str(tmp_path)],  # fmt: skip
+        capture_output=True,
+        text=True,
+        env=env,
+        preexec_fn=_file_size_limit(200_000),
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert "capture stopped: File too large" in proc.stderr and "STOPPED EARLY" in proc.stderr
+    assert "samples navigated: 20000 of 20000" in proc.stdout  # the session went on to the end
+    (path,) = tmp_path.glob("*.mcap")
+    assert path.stat().st_size <= 200_000
+    got = replay(path)["foot"]  # readable up to the last chunk that fitted
+    assert 1000 < len(got) < 20_000

@@ -77,8 +77,25 @@ def test_tick_unwrap_wrap_exactly_between_batches() -> None:
 def test_counter_gaps_duplicates_and_wrap() -> None:
     tracker = CounterTracker()
     c1, d1 = tracker.update(np.array([65533, 65534, 65535]))
-    c2, d2 = tracker.update(np.array([0, 0, 3, 4, 2]))  # wrap, duplicate, 2 lost, one step back
+    c2, d2 = tracker.update(np.array([0, 0, 3, 4, 2]))  # wrap, duplicate, 1 and 2 missing, 2 late
     np.testing.assert_array_equal(c1, [65533, 65534, 65535])
     np.testing.assert_array_equal(c2, [65536, 65536, 65539, 65540, 65538])
     np.testing.assert_array_equal(np.concatenate([d1, d2]), [0, 0, 0, 0, 1, 0, 0, 0])
-    assert (tracker.lost, tracker.duplicates, tracker.out_of_order) == (2, 1, 1)
+    assert (tracker.lost, tracker.duplicates, tracker.out_of_order) == (1, 1, 1)
+    tracker.update(np.array([1, 5, 5]))  # the other late one closes the gap; a repeat
+    assert (tracker.lost, tracker.duplicates, tracker.out_of_order) == (0, 2, 2)
+
+
+def test_counter_non_adjacent_repeat_is_a_duplicate_not_a_gap() -> None:
+    tracker = CounterTracker()
+    _, dup = tracker.update(np.array([5, 6, 7, 5, 8]))
+    np.testing.assert_array_equal(dup, [0, 0, 0, 1, 0])
+    assert (tracker.lost, tracker.duplicates, tracker.out_of_order) == (0, 1, 0)
+
+
+def test_counter_gaps_older_than_the_window_stay_lost() -> None:
+    tracker = CounterTracker(window=10)
+    tracker.update(np.array([0, 3]))
+    tracker.update(np.arange(4, 30))
+    tracker.update(np.array([1]))  # too late: counted as a repeat of a number given up on
+    assert tracker.lost == 2 and tracker.out_of_order == 0

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from device import protocol
+from device.emulator.faults import FaultInjector, FaultLog, WireFaults, split_frames
 from device.emulator.firmware import DEFAULT_TICK0, RESEND_INTERVAL_S, ShoeFirmware
 from device.emulator.scripts import BaroScript, InsTruth, StepScript, TofScript
 
@@ -68,6 +69,10 @@ class PtyShoeServer:
         resend_interval_s: lossless resend period (128 ms).
         mcu_id: 15 bytes answered to command 0x04.
         link_budget_bps: if set, never write faster than this many bytes per second.
+        faults: bit errors, dropped, duplicated and reordered packets (:mod:`.faults`); what was done
+            is in :attr:`fault_log`.
+        stall_every_s, stall_s: if set, stop writing for ``stall_s`` of every ``stall_every_s`` of wall
+            time (a host or hub that stops reading); the firmware keeps producing meanwhile.
     """
 
     def __init__(
@@ -95,6 +100,9 @@ class PtyShoeServer:
         resend_interval_s: float = RESEND_INTERVAL_S,
         mcu_id: bytes | None = None,
         link_budget_bps: float | None = None,
+        faults: WireFaults | None = None,
+        stall_every_s: float | None = None,
+        stall_s: float = 0.0,
     ) -> None:
         if split_writes_max is not None and split_writes_max < 1:
             raise ValueError("split_writes_max must be >= 1")
@@ -102,6 +110,8 @@ class PtyShoeServer:
             raise ValueError("garbage_every must be >= 1")
         if link_budget_bps is not None and not link_budget_bps > 0:
             raise ValueError(f"link_budget_bps must be > 0, got {link_budget_bps}")
+        if stall_every_s is not None and not 0.0 < stall_s < stall_every_s:
+            raise ValueError(f"need 0 < stall_s < stall_every_s, got {stall_s} and {stall_every_s}")
         extra = {} if mcu_id is None else {"mcu_id": mcu_id}
         self.firmware = ShoeFirmware(
             t_s,
@@ -127,6 +137,9 @@ class PtyShoeServer:
         self._garbage_every = garbage_every
         self._garbage_max_len = max(1, garbage_max_len)
         self._rng = np.random.default_rng(seed)
+        self._injector = FaultInjector(faults, seed + 1) if faults is not None and faults.any else None
+        self._stall_every_s, self._stall_s = stall_every_s, stall_s
+        self._stalls_started = 0
         self._record = record
         self._budget_bps = link_budget_bps
         self._tokens = 0.0 if link_budget_bps is None else link_budget_bps * _BUDGET_BURST_S
@@ -160,6 +173,17 @@ class PtyShoeServer:
         """Bytes written to the pty so far."""
         self.error: BaseException | None = None
         """What stopped the server thread, if it failed."""
+        self._t_start = time.monotonic()
+
+    @property
+    def fault_log(self) -> FaultLog:
+        """What the fault injector did so far (empty without ``faults``); read it once stopped."""
+        return self._injector.log if self._injector is not None else FaultLog()
+
+    @property
+    def stalls(self) -> int:
+        """Stall windows entered so far."""
+        return self._stalls_started
 
     @property
     def commands(self) -> list[protocol.Command]:
@@ -215,10 +239,16 @@ class PtyShoeServer:
     def _serve(self) -> None:
         master, wake = self._master, self._wake_r
         fw = self.firmware
+        self._t_start = time.monotonic()
         while not self._quit:
             now = time.monotonic()
             fw.produce(now)
             pending = self._inflight is not None or bool(fw.out)
+            if not pending and fw.exhausted and self._injector is not None:
+                held = self._injector.flush()
+                if held:
+                    fw.out.append((held, 1))
+                    pending = True
             if not pending and fw.exhausted and not self.finished.is_set():
                 self.finished.set()
             timeout: float | None = None
@@ -226,6 +256,10 @@ class PtyShoeServer:
             if wake_at is not None:
                 timeout = max(wake_at - time.monotonic(), self._chunk_interval_s)
             want_write = pending
+            stall_left = self._stall_left(now)
+            if pending and stall_left > 0.0:
+                want_write = False
+                timeout = stall_left if timeout is None else min(timeout, stall_left)
             if pending and self._budget_bps is not None and self._refill(now) < 1.0:
                 want_write = False  # out of budget: sleep until a byte's worth has accrued
                 wait = (1.0 - self._tokens) / self._budget_bps
@@ -248,19 +282,34 @@ class PtyShoeServer:
         self._tokens_at = now
         return self._tokens
 
-    def _with_garbage(self, data: bytes, count: int) -> bytes:
+    def _stall_left(self, now: float) -> float:
+        """Seconds left of the current stall window (0 outside one)."""
+        every = self._stall_every_s
+        if every is None:
+            return 0.0
+        cycle, phase = divmod(now - self._t_start, every)
+        if phase < every - self._stall_s:
+            return 0.0
+        self._stalls_started = max(self._stalls_started, int(cycle) + 1)
+        return every - phase
+
+    def _on_the_wire(self, data: bytes, count: int) -> tuple[bytes, int]:
+        """A firmware chunk as it goes out: through the fault injector, with garbage between packets."""
+        if self._injector is not None and count:
+            data, count = self._injector.apply(data)
         every = self._garbage_every
-        if every is None or count == 0 or len(data) % count:
-            return data
-        size = len(data) // count
+        if every is None or count == 0:
+            return data, count
         parts: list[bytes] = []
-        for k in range(0, len(data), size):
-            parts.append(data[k : k + size])
+        for frame in split_frames(data):
+            parts.append(frame)
+            if frame[0] != 0xAA:
+                continue
             self._packets_since_garbage += 1
             if self._packets_since_garbage >= every:
                 self._packets_since_garbage = 0
                 parts.append(self._garbage())
-        return b"".join(parts)
+        return b"".join(parts), count
 
     def _garbage(self) -> bytes:
         rng = self._rng
@@ -279,8 +328,8 @@ class PtyShoeServer:
             if self._inflight is None:
                 if not fw.out:
                     return
-                data, count = fw.out.popleft()
-                self._inflight, self._inflight_packets = memoryview(self._with_garbage(data, count)), count
+                data, count = self._on_the_wire(*fw.out.popleft())
+                self._inflight, self._inflight_packets = memoryview(data), count
             view = self._inflight
             size = len(view) if self._split_max is None else int(self._rng.integers(1, self._split_max + 1))
             if self._budget_bps is not None:
