@@ -99,8 +99,13 @@ def run_replay(opts: ReplayOptions) -> int:
     if not any(summary.rx_bytes.values()):
         cut = "ends before its first complete chunk of data" if summary.truncated else "holds no data from a unit"
         raise InputFormatError(f"{opts.path} {cut}; nothing to replay")
-    if summary.truncated:
-        notice(f"{opts.path} ends mid-record (the writer was killed?): replaying what is there")
+    if summary.corrupt_at is not None:
+        notice(
+            f"{opts.path} is corrupt after byte {summary.corrupt_at} of {opts.path.stat().st_size}: "
+            "replaying what comes before"
+        )
+    elif summary.truncated:
+        notice(f"{opts.path} ends mid-record (the writer was killed or the disk was full): replaying what is there")
     cfg = opts.config
     feet = info.feet
     for unit in info.units:

@@ -128,7 +128,7 @@ def run_filter_numpy(
         if not (dt > 0.0 and math.isfinite(dt)):
             counters[eskf.CNT_BAD_DT] += 1
         else:
-            counters[eskf.CNT_GAP] += dt > par[eskf.PAR_DT_MAX]
+            counters[eskf.CNT_GAP] += dt >= par[eskf.PAR_DT_MAX]
             R = quat_to_mat(x[6:10])
             f2 = w2 = 0.0
             if bad:  # hold the nominal motion, let the uncertainty grow

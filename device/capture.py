@@ -30,9 +30,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import hashlib
 import json
 import logging
-import struct
 import threading
 import time
 from collections import deque
@@ -41,7 +41,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import IO, Any, Final, Literal
 
-from mcap.exceptions import McapError
+from mcap.exceptions import EndOfFile
 from mcap.records import Channel, Header, Message, Metadata
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
@@ -58,6 +58,8 @@ FLUSH_PERIOD_S: Final = 0.1
 _MAGIC: Final = b"\x89MCAP0\r\n"
 _BYTES: Final = "application/octet-stream"
 _JSON: Final = "application/json"
+_RECORD_SIZE_LIMIT: Final = 1 << 26
+"""No record footnav writes comes near this (chunks close at 1 MiB); a larger length is corruption."""
 EXPECTED: Final = "a footnav capture (.mcap, MCAP profile 'footnav')"
 
 Direction = Literal["rx", "tx"]
@@ -311,7 +313,10 @@ class ReadState:
     """How a pass over a capture ended (filled in as :func:`iter_capture` goes)."""
 
     truncated: bool = False
-    """The file ended inside a record (a crashed or still-running writer): everything before was read."""
+    """The file ended inside a record (a crashed or still-running writer), or a record was corrupt:
+    everything before it was read."""
+    corrupt_at: int | None = None
+    """File offset of the last good record before an unreadable one that was not at the end."""
     bytes_read: int = 0
     size: int = 0
 
@@ -345,17 +350,21 @@ def iter_capture(path: Path, state: ReadState | None = None) -> Iterator[Capture
     channels: dict[int, tuple[str, str]] = {}
     announced = False
     with open(path, "rb") as f:
-        reader = StreamReader(f, record_size_limit=1 << 28)
+        reader = StreamReader(f, record_size_limit=_RECORD_SIZE_LIMIT, validate_crcs=True)
         records = reader.records
         while True:
             try:
                 rec = next(records)
             except StopIteration:
                 break
-            except (McapError, struct.error, EOFError, ValueError) as exc:
+            except Exception as exc:  # a corrupt file makes the MCAP and zstd decoders raise many kinds
                 if session is None:
-                    raise InputFormatError(f"{path} is not readable as MCAP ({exc}); expected {EXPECTED}") from exc
+                    raise InputFormatError(
+                        f"{path} is not readable as MCAP ({type(exc).__name__}: {exc}); expected {EXPECTED}"
+                    ) from exc
                 state.truncated = True
+                if not isinstance(exc, (EndOfFile, EOFError)):  # not the end of the file: corruption
+                    state.corrupt_at = state.bytes_read
                 break
             state.bytes_read = f.tell()
             if isinstance(rec, Header):
@@ -408,6 +417,10 @@ class CaptureSummary:
     last_ns: int | None
     rx_bytes: dict[str, int]
     events: dict[str, list[dict[str, Any]]]
+    rx_sha256: dict[str, str] = field(default_factory=dict)
+    """SHA-256 (hex) of each unit's device -> host bytes in capture order."""
+    corrupt_at: int | None = None
+    """File offset where an unreadable record stopped the pass before the end (see ``ReadState``)."""
 
     @property
     def duration_s(self) -> float:
@@ -422,6 +435,7 @@ def summarize_capture(path: Path) -> CaptureSummary:
     info: CaptureInfo | None = None
     first = last = None
     rx: dict[str, int] = {}
+    digests: dict[str, Any] = {}
     events: dict[str, list[dict[str, Any]]] = {}
     for item in iter_capture(path, state):
         if isinstance(item, CaptureInfo):
@@ -433,10 +447,12 @@ def summarize_capture(path: Path) -> CaptureSummary:
             continue
         if item.direction == "rx":
             rx[item.foot] = rx.get(item.foot, 0) + len(item.data)
+            digests.setdefault(item.foot, hashlib.sha256()).update(item.data)
             first = item.host_ns if first is None else first
             last = item.host_ns
     assert info is not None
-    return CaptureSummary(info, state.truncated, first, last, rx, events)
+    sha = {foot: d.hexdigest() for foot, d in digests.items()}
+    return CaptureSummary(info, state.truncated, first, last, rx, events, sha, state.corrupt_at)
 
 
 class CaptureReplayLink:

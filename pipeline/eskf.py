@@ -68,6 +68,18 @@ CNT_BAD_DT, CNT_GAP, CNT_BAD_SAMPLE, CNT_UPDATES, CNT_ZARU, CNT_ZARU_REJECTED = 
 N_CNT = 6
 
 
+def sample_intervals(t_s: F64, t_prev_s: float, dt_max_s: float) -> F64:
+    """Intervals (n,) ending at each sample of ``t_s`` (n,), s, the first one from ``t_prev_s``.
+
+    An interval of ``dt_max_s`` or more is a gap in the stream (lost packets, a corrupt time stamp):
+    it is integrated as ``dt_max_s``, because the IMU says nothing about the motion in between and
+    integrating one sample over seconds (or over a corrupt stamp's years) only adds error; the filter
+    counts it as a gap. Non-positive or NaN intervals pass through: the filter skips and counts them.
+    """
+    return np.minimum(np.diff(t_s, prepend=t_prev_s), dt_max_s)
+
+
+
 @njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _propagate_cov(P: F64, M: F64, R: F64, f_n: F64, dt: float, q_diag: F64) -> None:
     """P ← F P Fᵀ + Q in place, F = I + A dt with the blocks of the module docstring.
@@ -289,7 +301,7 @@ def _predict(
     if not propagated:
         counters[CNT_BAD_DT] += 1
     else:
-        if dt > par[PAR_DT_MAX]:
+        if dt >= par[PAR_DT_MAX]:
             counters[CNT_GAP] += 1
         quat_to_mat_into(x[6], x[7], x[8], x[9], R0)
         if bad:
@@ -374,7 +386,8 @@ def run_filter(
         x, P: nominal state and error covariance, carried between batches.
         acc_b_mps2, gyr_b_radps: (n, 3) IMU samples; sample k covers the interval ending at it.
         dt_s: (n,) interval before each sample, s. Non-positive intervals skip the propagation
-            (duplicated timestamps); intervals above ``par[PAR_DT_MAX]`` are counted as gaps.
+            (duplicated timestamps); intervals of ``par[PAR_DT_MAX]`` or more are counted as gaps
+            (:func:`sample_intervals` caps them there).
         stance: (n,) apply ZUPT + ZARU after propagating sample k.
         par: (N_PAR,) parameters (see the PAR_* indices).
         out_pos, out_vel: (n, 3) outputs; out_quat (n, 4); out_cov (n, 4, 4): the covariance of
@@ -419,7 +432,7 @@ def run_filter(
         if dt <= 0.0 or not math.isfinite(dt):
             counters[CNT_BAD_DT] += 1
         else:
-            if dt > par[PAR_DT_MAX]:
+            if dt >= par[PAR_DT_MAX]:
                 counters[CNT_GAP] += 1
             quat_to_mat_into(x[6], x[7], x[8], x[9], R0)
             if bad:

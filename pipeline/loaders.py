@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import math
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -72,27 +73,32 @@ def load_pyshoe_mat(path: Path) -> Recording:
 
     try:
         mat = loadmat(str(path))
-    except (ValueError, OSError, NotImplementedError) as exc:
-        raise InputFormatError(f"{path}: not a MATLAB .mat file readable as a PyShoe trial ({exc})") from None
+    except Exception as exc:  # scipy raises many kinds on a corrupt file
+        raise InputFormatError(
+            f"{path}: not a MATLAB .mat file readable as a PyShoe trial ({type(exc).__name__}: {exc})"
+        ) from None
     missing = [k for k in ("ts", "imu") if k not in mat]
     if missing:
         raise InputFormatError(
             f"{path}: a PyShoe trial needs fields ts and imu; missing {', '.join(missing)}"
         )
-    t = np.asarray(mat["ts"], dtype=np.float64).ravel()
-    imu = np.asarray(mat["imu"], dtype=np.float64)
-    if imu.ndim != 2 or imu.shape != (t.size, 6):
-        raise InputFormatError(f"{path}: expected imu of shape ({t.size}, 6), got {imu.shape}")
+    t = _mat_f64(mat, "ts", path).ravel()
+    imu = _mat_f64(mat, "imu", path)
+    if t.size < 2 or imu.ndim != 2 or imu.shape != (t.size, 6):
+        raise InputFormatError(
+            f"{path}: expected ts of n >= 2 times and imu of shape (n, 6), got {t.shape}, {imu.shape}"
+        )
     gt = None
     notes = []
     if "gt" in mat:
-        gt = np.asarray(mat["gt"], dtype=np.float64).reshape(-1, 3).copy()
-        if gt.shape[0] == t.size:
+        gt = _mat_f64(mat, "gt", path)
+        if gt.ndim == 2 and gt.shape == (t.size, 3):
+            gt = gt.copy()
             gt[:, 1] *= -1.0
             notes.append("ground truth converted from the left-handed VICON frame (y negated)")
         else:
             gt = None
-            notes.append("ground truth length differs from the IMU's; ignored")
+            notes.append("ground truth is not one (x, y, z) row per IMU sample; ignored")
     return Recording(
         name=path.stem,
         format="pyshoe",
@@ -104,6 +110,13 @@ def load_pyshoe_mat(path: Path) -> Recording:
         gt_pos_m=gt,
         notes=notes,
     )
+
+
+def _mat_f64(mat: dict[str, object], name: str, path: Path) -> F64:
+    try:
+        return np.asarray(mat[name], dtype=np.float64)
+    except (ValueError, TypeError):
+        raise InputFormatError(f"{path}: field {name} is not numeric") from None
 
 
 XIO_COLUMNS = (
@@ -280,7 +293,9 @@ def _csv_header(path: Path) -> list[str]:
 
 def _read_numeric_csv(path: Path, skip: int, ncols: int) -> F64:
     try:
-        data = np.loadtxt(path, delimiter=",", skiprows=skip, ndmin=2)
+        with warnings.catch_warnings():  # "no data" is reported below, as an error
+            warnings.simplefilter("ignore", UserWarning)
+            data = np.loadtxt(path, delimiter=",", skiprows=skip, ndmin=2)
     except ValueError as exc:
         raise InputFormatError(f"{path}: non-numeric values in the data rows ({exc})") from None
     if data.shape[1] < ncols or data.shape[0] < 2:

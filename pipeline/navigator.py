@@ -38,7 +38,8 @@ class NavConfig:
         align_s: continuous quiet time needed for the initial alignment, s.
         align_max_rate_radps: quiet means |ω| below this at every sample of the window, rad/s.
         align_max_acc_dev_mps2: and | |f| − mean |f| | below this, m/s².
-        dt_max_s: intervals longer than this are counted as gaps in the stream, s.
+        dt_max_s: intervals this long or longer are gaps in the stream, counted and integrated as
+            this long (``eskf.sample_intervals``), s.
         init_pos_sigma_m, init_vel_sigma_mps: initial 1σ of position and velocity.
         init_tilt_sigma_rad, init_yaw_sigma_rad: initial 1σ of roll/pitch and of yaw.
         max_wait_s: how much unaligned data to keep while waiting for a still period, s.
@@ -206,7 +207,7 @@ class Navigator:
     def _run(self, batch: ImuBatch, stat: F64, threshold: F64, still: NDArray[np.bool_]) -> NavBatch:
         assert self._x is not None
         n = len(batch)
-        dt = np.diff(batch.t_s, prepend=self._t_last)
+        dt = eskf.sample_intervals(batch.t_s, self._t_last, self.config.dt_max_s)
         self._t_last = float(batch.t_s[-1])
         pos, vel = np.empty((n, 3)), np.empty((n, 3))
         quat, cov = np.empty((n, 4)), np.empty((n, 4, 4))

@@ -65,7 +65,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from pipeline import eskf
-from pipeline.eskf import BA0, BG0, N_CNT, N_STATE, P0, TH0, V0, _correct, _predict
+from pipeline.eskf import BA0, BG0, N_CNT, N_STATE, P0, TH0, V0, _correct, _predict, sample_intervals
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavConfig, Navigator, NavStats, nav_batch
 from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s
@@ -393,7 +393,7 @@ def smooth_recording(
     stance = np.ascontiguousarray(still)
     n = len(batch)
     t_first = nav.checkpoints[0][3]
-    dt = np.diff(batch.t_s, prepend=t_first)  # as Navigator._run computes it
+    dt = sample_intervals(batch.t_s, t_first, nav.config.dt_max_s)  # as Navigator._run computes it
     # the outputs are overwritten in place, the smoothed solution replacing the causal one
     pos, vel, quat, cov = out.pos_n_m, out.vel_n_mps, out.quat_nb_wxyz, out.cov_pos_yaw
     assert cov is not None

@@ -120,6 +120,14 @@ def test_truncated_capture_replays_up_to_its_end(tmp_path: Path, capsys: pytest.
     assert 1000 < len(got) < len(live["foot"])
     assert_identical(got, NavBatch(**{f: getattr(live["foot"], f)[: len(got)] for f in FIELDS}))
     assert "ends mid-record" in capsys.readouterr().err
+    broken = tmp_path / "cut" / "broken.mcap"
+    flipped = bytearray(data)
+    flipped[int(len(data) * 0.5)] ^= 0x10  # inside a compressed chunk: its CRC no longer matches
+    broken.write_bytes(bytes(flipped))
+    assert summarize_capture(broken).corrupt_at is not None
+    got = replay(broken)["foot"]
+    assert 1000 < len(got) < len(live["foot"])
+    assert "is corrupt after byte" in capsys.readouterr().err
     tiny = tmp_path / "cut" / "tiny.mcap"
     tiny.write_bytes(data[:20])
     with pytest.raises(InputFormatError, match=r"expected a footnav capture \(\.mcap"):
@@ -194,9 +202,10 @@ def _file_size_limit(limit_bytes: int) -> Callable[[], None]:
 
 def test_full_disk_stops_the_capture_with_a_message_and_the_session_goes_on(tmp_path: Path) -> None:
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    command = [sys.executable, "-m", "app", "demo", "--duration", "20", "--pace", "max", "--no-viewer"]
     proc = subprocess.run(
-        [sys.executable, "-m", "app", "demo", "--duration", "20", "--pace", "max", "--no-viewer",
-         "--sessions", str(tmp_path)],  # fmt: skip
+        [*command, "--sessions", str(tmp_path)],
+        check=False,
         capture_output=True,
         text=True,
         env=env,

@@ -18,14 +18,14 @@ from device.emulator.faults import FaultInjector, WireFaults, split_frames
 from device.emulator.pty_server import PtyShoeServer
 from device.framer import DataPacket, Framer
 from device.imu_packets import encode_packets
-from device.unit import OpenShoeUnit, LinkStats
+from device.unit import LinkStats, OpenShoeUnit
 from pipeline.samples import ImuBatch
 
 
 def _signals(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
     t = np.arange(n) / 1000.0
-    return t, rng.standard_normal((n, 3)) + [0.0, 0.0, 9.81], rng.standard_normal((n, 3))
+    return t, rng.standard_normal((n, 3)) + np.array([0.0, 0.0, 9.81]), rng.standard_normal((n, 3))
 
 
 def _packets(n: int) -> bytes:

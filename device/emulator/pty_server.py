@@ -15,6 +15,7 @@ unplug).
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import select
 import termios
@@ -158,6 +159,7 @@ class PtyShoeServer:
         self._inflight: memoryview | None = None
         self._inflight_packets = 0
         self._sent = bytearray()
+        self._sent_hash = hashlib.sha256()
         self._lock = threading.Lock()
         self._quit = False
         self._closed = False
@@ -179,6 +181,12 @@ class PtyShoeServer:
     def fault_log(self) -> FaultLog:
         """What the fault injector did so far (empty without ``faults``); read it once stopped."""
         return self._injector.log if self._injector is not None else FaultLog()
+
+    @property
+    def sent_sha256(self) -> str:
+        """SHA-256 (hex) of every byte written so far (kept with or without ``record``)."""
+        with self._lock:
+            return self._sent_hash.hexdigest()
 
     @property
     def stalls(self) -> int:
@@ -343,8 +351,9 @@ class PtyShoeServer:
             if self._budget_bps is not None:
                 self._tokens -= written
             self.bytes_written += written
-            if self._record:
-                with self._lock:
+            with self._lock:
+                self._sent_hash.update(view[:written])
+                if self._record:
                     self._sent += view[:written]
             if written == len(view):
                 self._inflight = None

@@ -1,0 +1,278 @@
+"""Soak: two feet at 1 kHz through ``footnav live`` for a long walk, accelerated; memory, capture, gaps.
+
+``python -m benchmarks.soak --minutes 60`` runs, and prints as one table:
+
+- an emulator child (:class:`device.emulator.pty_server.PtyShoeServer` per foot, the demo's walk and
+  sensor errors, optionally with wire faults) serving as fast as footnav reads (``--pace max``, the
+  default: the firmware then waits for the host, so an hour takes minutes) or in real time;
+- a footnav child running exactly ``footnav live --left PTY --right PTY --no-viewer --save soak.rrd``
+  with its capture on, whose resident memory (``VmRSS`` from ``/proc``) is sampled every
+  ``--rss-every`` seconds; it is stopped with SIGINT (as Ctrl-C) once both emulated units have sent
+  their last byte and the capture has caught up.
+
+Then it checks, per foot: the capture's device -> host bytes equal the emulator's sent bytes (SHA-256
+of each), and every data packet is accounted for (the unit driver's framer and counter tracker over
+the captured bytes: packets received = the emulator's packets less those the fault injector dropped
+or corrupted, and those are counted lost); and reports peak RSS and its slope over the run's second half (flat means the
+slope's change over the run is small against the peak). Nothing is asserted on timings; the figures
+go in the README. ``tests/test_soak.py`` runs a short soak with the same code.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+FEET = ("left", "right")
+
+
+def _serve(seconds: float, pace: float, drop_rate: float, bit_error_rate: float) -> int:
+    """Serve two emulated shoes; print their ports, then (once both finished) their totals."""
+    from app.demo import DemoOptions, demo_truth
+    from device.emulator.faults import WireFaults
+    from device.emulator.pty_server import PtyShoeServer
+
+    opts = DemoOptions(duration_s=seconds, feet=2)
+    faults = WireFaults(drop_rate=drop_rate, bit_error_rate=bit_error_rate)
+    servers = []
+    for k in range(2):
+        truth, acc, gyr = demo_truth(opts, k)
+        servers.append(PtyShoeServer(truth.t_s, acc, gyr, speed=pace, record=False, faults=faults, seed=k))
+        del truth, acc, gyr
+    for s in servers:
+        s.start()
+    print(json.dumps({"ports": [s.port for s in servers]}), flush=True)
+    while not all(s.finished.is_set() for s in servers):
+        time.sleep(0.2)
+    print(json.dumps({"finished": True}), flush=True)
+    sys.stdin.readline()  # footnav has stopped the units (their last ACKs are written) and exited
+    for s in servers:
+        s.stop()
+    report = [
+        {
+            "sha256": s.sent_sha256,
+            "bytes": s.bytes_written,
+            "packets_in": s.fault_log.packets_in or s.packets_sent,
+            "dropped": len(s.fault_log.dropped),
+            "corrupted": len(s.fault_log.corrupted),
+        }
+        for s in servers
+    ]
+    print(json.dumps({"report": report}), flush=True)
+    return 0
+
+
+def _rss_mb(pid: int) -> float:
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return math.nan
+
+
+@dataclass
+class SoakResult:
+    minutes: float
+    wall_s: float
+    rss_t_s: np.ndarray
+    rss_mb: np.ndarray
+    feet: dict[str, dict[str, Any]] = field(default_factory=dict)
+    footnav_code: int = 0
+    rrd_mb: float = math.nan
+    capture_mb: float = math.nan
+
+    @property
+    def peak_mb(self) -> float:
+        return float(np.nanmax(self.rss_mb)) if self.rss_mb.size else math.nan
+
+    @property
+    def slope_mb_per_h(self) -> float:
+        """Least-squares slope of RSS over the run's second half, MB per hour of wall time."""
+        half = self.rss_t_s >= self.rss_t_s[-1] / 2 if self.rss_t_s.size else np.zeros(0, bool)
+        if np.count_nonzero(half) < 3:
+            return math.nan
+        return float(np.polyfit(self.rss_t_s[half], self.rss_mb[half], 1)[0] * 3600.0)
+
+    @property
+    def growth_mb(self) -> float:
+        """RSS at the end minus RSS at the start of the second half (median of the first/last 5 samples)."""
+        half = np.flatnonzero(self.rss_t_s >= self.rss_t_s[-1] / 2) if self.rss_t_s.size else []
+        if len(half) < 10:
+            return math.nan
+        return float(np.median(self.rss_mb[half[-5:]]) - np.median(self.rss_mb[half[:5]]))
+
+    @property
+    def ok(self) -> bool:
+        return self.footnav_code == 0 and all(f["capture_equals_sent"] and f["accounted"] for f in self.feet.values())
+
+
+def _account(capture: Path, emulator: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per foot: capture bytes vs the emulator's, and packets received + lost vs packets sent."""
+    from device.capture import iter_capture, summarize_capture
+    from device.framer import DataPacket, Framer
+    from device.imu_packets import CounterTracker
+
+    summary = summarize_capture(capture)
+    out: dict[str, dict[str, Any]] = {}
+    for foot, emu in zip(FEET, emulator, strict=True):
+        framer, tracker = Framer(), CounterTracker()
+        received = 0
+        for item in iter_capture(capture):
+            if getattr(item, "foot", None) != foot or getattr(item, "direction", None) != "rx":
+                continue
+            numbers = [f.number for f in framer.feed(item.data) if isinstance(f, DataPacket)]
+            if numbers:
+                _, dup = tracker.update(np.asarray(numbers))
+                received += int(np.count_nonzero(~dup))
+        faults = emu["dropped"] + emu["corrupted"]
+        out[foot] = {
+            "capture_equals_sent": summary.rx_sha256.get(foot) == emu["sha256"],
+            "bytes": summary.rx_bytes.get(foot, 0),
+            "sent_bytes": emu["bytes"],
+            "received": received,
+            "lost": tracker.lost,
+            "emulator_packets": emu["packets_in"],
+            "dropped_or_corrupted": faults,
+            # every packet the emulator sent arrived once, unless the injector dropped or broke it;
+            # those are counted lost (all but any at the very end, which no receiver can see)
+            "accounted": received + faults == emu["packets_in"] and tracker.lost <= faults,
+        }
+    return out
+
+
+def _readline(stream: IO[str], timeout_s: float) -> str:
+    result: list[str] = []
+    reader = threading.Thread(target=lambda: result.append(stream.readline()), daemon=True)
+    reader.start()
+    reader.join(timeout_s)
+    if not result or not result[0]:
+        raise RuntimeError(f"no answer from the emulator child within {timeout_s:.0f} s")
+    return result[0]
+
+
+def run_soak(
+    minutes: float,
+    work: Path,
+    *,
+    pace: float = math.inf,
+    rss_every_s: float = 1.0,
+    drop_rate: float = 0.0,
+    bit_error_rate: float = 0.0,
+) -> SoakResult:
+    """Run the soak (see the module docstring) in ``work``; returns what it measured."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    env.pop("DISPLAY", None)
+    env.pop("WAYLAND_DISPLAY", None)
+    emu = subprocess.Popen(
+        [sys.executable, "-m", "benchmarks.soak", "_serve", "--seconds", str(minutes * 60.0), "--pace", str(pace),
+         "--drop-rate", str(drop_rate), "--bit-error-rate", str(bit_error_rate)],
+        cwd=ROOT, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    sessions, rrd = work / "sessions", work / "soak.rrd"
+    try:
+        assert emu.stdout is not None and emu.stdin is not None
+        ports = json.loads(_readline(emu.stdout, 60.0 + minutes * 10.0))["ports"]
+        t0 = time.monotonic()
+        with open(work / "footnav.stderr", "w") as err:
+            live = subprocess.Popen(
+                [sys.executable, "-m", "app", "live", "--left", ports[0], "--right", ports[1], "--no-viewer",
+                 "--save", str(rrd), "--sessions", str(sessions)],
+                cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=err,
+            )  # fmt: skip
+            finished: list[str] = []
+            waiter = threading.Thread(target=lambda: finished.append(emu.stdout.readline()), daemon=True)  # type: ignore[union-attr]
+            waiter.start()
+            times, rss = [], []
+            while live.poll() is None and not finished:
+                times.append(time.monotonic() - t0)
+                rss.append(_rss_mb(live.pid))
+                waiter.join(rss_every_s)
+            time.sleep(3.0)  # the last reads reach the capture
+            live.send_signal(signal.SIGINT)
+            code = live.wait(120)
+        wall = time.monotonic() - t0
+        emu.stdin.write("stop\n")
+        emu.stdin.flush()
+        emulator = json.loads(_readline(emu.stdout, 60.0))["report"]
+        emu.wait(60)
+    finally:
+        for proc in (emu,):
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    result = SoakResult(minutes, wall, np.asarray(times), np.asarray(rss), footnav_code=code)
+    if not finished or not finished[0]:
+        raise RuntimeError(f"footnav stopped (code {code}) before the emulator finished; see {work}/footnav.stderr")
+    captures = sorted(sessions.glob("*.mcap"))
+    if not captures:
+        raise RuntimeError(f"footnav wrote no capture; see {work}/footnav.stderr")
+    result.feet = _account(captures[-1], emulator)
+    result.rrd_mb = rrd.stat().st_size / 1e6 if rrd.exists() else math.nan
+    result.capture_mb = captures[-1].stat().st_size / 1e6
+    return result
+
+
+def report(r: SoakResult) -> None:
+    print(f"soak: two feet at 1 kHz, {r.minutes:g} min of walk, {r.wall_s:.0f} s wall, footnav exit {r.footnav_code}")
+    print(f"{'':<8}{'capture = sent':>16}{'bytes':>14}{'received':>11}{'lost':>7}{'sent':>11}{'faults':>8}")
+    for foot, f in r.feet.items():
+        print(
+            f"{foot:<8}{'yes' if f['capture_equals_sent'] else 'NO':>16}{f['bytes']:>14}{f['received']:>11}"
+            f"{f['lost']:>7}{f['emulator_packets']:>11}{f['dropped_or_corrupted']:>8}"
+        )
+    print(
+        f"peak RSS {r.peak_mb:.0f} MB (target <= 400); second-half slope {r.slope_mb_per_h:+.1f} MB/h, "
+        f"growth {r.growth_mb:+.1f} MB; .rrd {r.rrd_mb:.0f} MB, capture {r.capture_mb:.0f} MB"
+    )
+    print("every byte captured and every packet accounted for" if r.ok else "FAILED: see the table")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.soak", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="cmd")
+    serve = sub.add_parser("_serve")
+    serve.add_argument("--seconds", type=float, required=True)
+    serve.add_argument("--pace", type=float, default=math.inf)
+    serve.add_argument("--drop-rate", type=float, default=0.0)
+    serve.add_argument("--bit-error-rate", type=float, default=0.0)
+    parser.add_argument("--minutes", type=float, default=60.0, help="walk length (default 60)")
+    parser.add_argument("--pace", default="max", help="emulator pace: max (default) or a factor, 1 = real time")
+    parser.add_argument("--drop-rate", type=float, default=0.0, help="wire fault: dropped packets (fraction)")
+    parser.add_argument("--bit-error-rate", type=float, default=0.0, help="wire fault: bit error rate")
+    parser.add_argument("--rss-every", type=float, default=1.0, metavar="S")
+    parser.add_argument("--work", type=Path, help="keep the files here (default: a temporary folder)")
+    args = parser.parse_args(argv)
+    if args.cmd == "_serve":
+        return _serve(args.seconds, args.pace, args.drop_rate, args.bit_error_rate)
+    pace = math.inf if args.pace == "max" else float(args.pace)
+    with tempfile.TemporaryDirectory(prefix="footnav-soak-") as tmp:
+        work = args.work or Path(tmp)
+        work.mkdir(parents=True, exist_ok=True)
+        r = run_soak(
+            args.minutes, work, pace=pace, rss_every_s=args.rss_every, drop_rate=args.drop_rate,
+            bit_error_rate=args.bit_error_rate,
+        )  # fmt: skip
+    report(r)
+    return 0 if r.ok else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
