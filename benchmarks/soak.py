@@ -129,7 +129,7 @@ def _account(capture: Path, emulator: list[dict[str, Any]]) -> dict[str, dict[st
     from device.framer import DataPacket, Framer
     from device.imu_packets import CounterTracker
 
-    summary = summarize_capture(capture)
+    summary = summarize_capture(capture, full=True)
     out: dict[str, dict[str, Any]] = {}
     for foot, emu in zip(FEET, emulator, strict=True):
         framer, tracker = Framer(), CounterTracker()

@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import IO, Any, Final, Literal
 
 from mcap.exceptions import EndOfFile
+from mcap.reader import make_reader
 from mcap.records import Channel, Header, Message, Metadata
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
@@ -429,8 +430,19 @@ class CaptureSummary:
         return (self.last_ns - self.first_ns) / 1e9
 
 
-def summarize_capture(path: Path) -> CaptureSummary:
-    """One pass over a capture: time span, bytes per unit, events, truncation."""
+def summarize_capture(path: Path, *, full: bool = False) -> CaptureSummary:
+    """Time span, data per unit, events and truncation of a capture.
+
+    A cleanly closed capture ends with an MCAP summary (statistics and chunk indexes): its counts
+    are read from there and its events from the few chunks that hold them, without reading the
+    data. A capture without one (a killed writer, a full disk) or ``full=True`` takes one pass over
+    every record, which also gives ``rx_bytes`` and ``rx_sha256`` (in the indexed case ``rx_bytes``
+    counts reads, not bytes).
+    """
+    if not full:
+        indexed = _summary_from_index(path)
+        if indexed is not None:
+            return indexed
     state = ReadState()
     info: CaptureInfo | None = None
     first = last = None
@@ -453,6 +465,34 @@ def summarize_capture(path: Path) -> CaptureSummary:
     assert info is not None
     sha = {foot: d.hexdigest() for foot, d in digests.items()}
     return CaptureSummary(info, state.truncated, first, last, rx, events, sha, state.corrupt_at)
+
+
+def _summary_from_index(path: Path) -> CaptureSummary | None:
+    """The summary from the file's MCAP summary section, or None if it has none (see above)."""
+    info = read_capture_info(path)  # checks magic and profile, reads the metadata
+    try:
+        with open(path, "rb") as f:
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            if summary is None or summary.statistics is None:
+                return None
+            stats = summary.statistics
+            topics = {cid: ch.topic for cid, ch in summary.channels.items()}
+            rx: dict[str, int] = {}
+            for cid, count in stats.channel_message_counts.items():
+                foot, _, direction = topics.get(cid, "?/?").rpartition("/")
+                if direction == "rx":
+                    rx[foot] = rx.get(foot, 0) + count
+            events: dict[str, list[dict[str, Any]]] = {}
+            event_topics = [t for t in topics.values() if t.endswith("/events")]
+            for _, channel, message in reader.iter_messages(topics=event_topics, log_time_order=False):
+                with contextlib.suppress(json.JSONDecodeError):
+                    events.setdefault(channel.topic.rpartition("/")[0], []).append(json.loads(message.data))
+    except Exception:  # any doubt about the index: read the whole file instead
+        return None
+    offset = int(info.session.get("monotonic_to_unix_ns", "0"))
+    first, last = stats.message_start_time - offset, stats.message_end_time - offset
+    return CaptureSummary(info, False, first, last, rx, events)
 
 
 class CaptureReplayLink:

@@ -157,6 +157,13 @@ class CounterTracker:
         self.out_of_order = 0
         """Numbers that arrived after a higher one (they filled a gap)."""
 
+    def continues(self, numbers: NDArray[np.integer]) -> bool:
+        """True if ``numbers`` (n,) are the next numbers in sequence (nothing lost, repeated or late)."""
+        raw = np.asarray(numbers, dtype=np.int64)
+        if raw.size == 0 or self._last_raw is None or self._last_total != self._high:
+            return False
+        return bool(np.all(np.diff(raw, prepend=self._last_raw) % COUNTER_WRAP == 1))
+
     def update(self, numbers: NDArray[np.integer]) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
         """Track the next package numbers (n,), in arrival order.
 

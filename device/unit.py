@@ -39,7 +39,7 @@ import numpy as np
 from device import extensions, ins_states, raw_imu, stepwise
 from device import protocol as p
 from device.extensions import BaroBatch, TofBatch
-from device.framer import DataPacket, DeviceAck, Framer
+from device.framer import DataPacket, DeviceAck, Framer, PacketRun
 from device.imu_packets import PAYLOAD_LEN, CounterTracker, SharedTickClock, decode_payloads
 from device.ins_states import InsLayout, InsStateBatch
 from device.raw_imu import RawImuBatch, RawImuLayout
@@ -592,12 +592,20 @@ class OpenShoeUnit:
         self._bytes_received += len(data)
         if self._capture is not None:
             self._capture("rx", host_ns, data)
+        frames = self._framer.feed_runs(data)
+        if len(frames) == 1 and type(frames[0]) is PacketRun:
+            fast = self._normal_run(frames[0], host_ns)
+            if fast is not None:
+                return fast
         numbers: list[int] = []
         payloads: list[bytes] = []
-        for frame in self._framer.feed(data):
+        for frame in frames:
             if type(frame) is DataPacket:
                 numbers.append(frame.number)
                 payloads.append(frame.payload)
+            elif type(frame) is PacketRun:
+                numbers.extend(frame.numbers.tolist())
+                payloads.extend(row.tobytes() for row in frame.payloads)
             elif type(frame) is DeviceAck:
                 self._acks.append(frame.cmd_id)
                 del self._acks[:-_MAX_REMEMBERED_ACKS]
@@ -617,6 +625,25 @@ class OpenShoeUnit:
                 continue
             self._route(decoded, int(counters[i]), numbers[i], payloads[i])
         return self._build(decoded)
+
+    def _normal_run(self, run: PacketRun, host_ns: int) -> list[Batch] | None:
+        """A read that is one run of normal-IMU packets in sequence, decoded without a per-packet
+        step; None when the general path is needed (another mode, lossless ACKs, gaps, repeats)."""
+        if not (
+            isinstance(self._mode, NormalImuMode)
+            and run.payloads.shape[1] == PAYLOAD_LEN
+            and not self._lossless
+            and not self._awaiting_mcu_id
+            and self._counters.continues(run.numbers)
+        ):
+            return None
+        counters, _ = self._counters.update(run.numbers)
+        arr = decode_payloads(run.payloads.tobytes())
+        m = len(run)
+        self._samples += m
+        t_s = self._clock.update(arr.ticks.astype(np.int64))
+        host = np.full(m, host_ns, dtype=np.int64)
+        return [ImuBatch(t_s, arr.acc_b_mps2, arr.gyr_b_radps, counters, host)]
 
     def _route(self, out: _Decoded, counter: int, number: int, payload: bytes) -> None:
         n = len(payload)

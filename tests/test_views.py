@@ -152,7 +152,7 @@ def test_nav_arrays_shapes() -> None:
     nav = synth_walk(50, np.random.default_rng(0))
     arr = convert.nav_arrays(nav)
     assert arr.pos.shape == (50, 3) and arr.pos.dtype == np.float32
-    assert arr.quat_xyzw.shape == (50, 4) and arr.cov_quat_xyzw.shape == (50, 4)
+    assert arr.quat_xyzw.shape == (50, 4) and arr.ellipsoids()[1].shape == (50, 4)
     assert arr.pos_sigma.shape == (50, 4) and arr.detector.shape == (50, 2)
     np.testing.assert_array_equal(arr.class_ids, nav.stance.astype(np.uint16))
     cols = {
@@ -167,7 +167,7 @@ def test_nav_arrays_shapes() -> None:
     index, cov_cols = cov["world/foot/cov"]
     np.testing.assert_allclose(np.asarray(index.as_arrow_array()).astype(np.int64) / 1e9, nav.t_s[7::10])
     half = {str(c.component_descriptor()): c.as_arrow_array() for c in cov_cols}["Ellipsoids3D:half_sizes"]
-    np.testing.assert_allclose(np.array(half.to_pylist())[:, 0, :], arr.cov_half_sizes[7::10], rtol=1e-6)
+    np.testing.assert_allclose(np.array(half.to_pylist())[:, 0, :], arr.ellipsoids()[0][7::10], rtol=1e-6)
     assert "world/foot/cov" not in {
         path for path, _, _ in convert.nav_columns(arr, FootPaths(), ellipsoid_every=0)
     }

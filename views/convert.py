@@ -131,8 +131,8 @@ class NavArrays:
         pos: (n, 3) float32 IMU position, m (track points, pose translation, ellipsoid centres).
         class_ids: (n,) uint16, 1 = stance, 0 = swing.
         quat_xyzw: (n, 4) float32 attitude body to navigation.
-        cov_half_sizes: (n, 3) float32 k-sigma ellipsoid half-sizes, m.
-        cov_quat_xyzw: (n, 4) float32 ellipsoid orientation in the navigation frame.
+        pos_cov: (n, 3, 3) position covariance, m² (ellipsoids: :meth:`ellipsoids`, for the rows shown).
+        sigma_scale: k of the k-sigma ellipsoids.
         stance: (n,) float64 0.0 / 1.0.
         clearance: (n,) float64, m.
         pos_sigma: (n, 4) float64 ``[σx, σy, σz, sqrt(trace)]``, m.
@@ -145,8 +145,8 @@ class NavArrays:
     pos: F32
     class_ids: NDArray[np.uint16]
     quat_xyzw: F32
-    cov_half_sizes: F32
-    cov_quat_xyzw: F32
+    pos_cov: F64
+    sigma_scale: float
     stance: F64
     clearance: F64
     pos_sigma: F64
@@ -154,19 +154,24 @@ class NavArrays:
     speed: F64
     heading: F64
 
+    def ellipsoids(self, rows: slice = slice(None)) -> tuple[F32, F32]:
+        """k-sigma ellipsoid half-sizes (m, 3) and orientations ``xyzw`` (m, 4), float32, of ``rows``
+        (an eigen-decomposition each: only for the rows that are drawn)."""
+        half_sizes, quat = cov_ellipsoids(self.pos_cov[rows], sigma_scale=self.sigma_scale)
+        return half_sizes.astype(np.float32), quat.astype(np.float32)
+
 
 def nav_arrays(nav: NavBatch, *, sigma_scale: float = DEFAULT_SIGMA_SCALE) -> NavArrays:
     """Convert a NavBatch of n samples to :class:`NavArrays` (pure numpy)."""
     n = len(nav)
-    half_sizes, cov_q = cov_ellipsoids(nav.pos_cov_n_m2, sigma_scale=sigma_scale)
     stance = np.asarray(nav.stance, dtype=bool)
     return NavArrays(
         t_s=np.asarray(nav.t_s, dtype=np.float64),
         pos=np.asarray(nav.pos_n_m, dtype=np.float32),
         class_ids=np.where(stance, STANCE_CLASS, SWING_CLASS).astype(np.uint16),
         quat_xyzw=quat_wxyz_to_xyzw(nav.quat_nb_wxyz).astype(np.float32),
-        cov_half_sizes=half_sizes.astype(np.float32),
-        cov_quat_xyzw=cov_q.astype(np.float32),
+        pos_cov=np.asarray(nav.pos_cov_n_m2, dtype=np.float64),
+        sigma_scale=sigma_scale,
         stance=stance.astype(np.float64),
         clearance=np.asarray(nav.clearance_m, dtype=np.float64),
         pos_sigma=pos_sigmas(nav.pos_cov_n_m2),
@@ -281,9 +286,8 @@ def nav_columns(
     t_cov = arrays.t_s[sl]
     if t_cov.size:
         cov_index = index if ellipsoid_every == 1 else time_column(t_cov)
-        cov_cols = rr.Ellipsoids3D.columns(
-            centers=arrays.pos[sl], half_sizes=arrays.cov_half_sizes[sl], quaternions=arrays.cov_quat_xyzw[sl]
-        )
+        half_sizes, quat = arrays.ellipsoids(sl)
+        cov_cols = rr.Ellipsoids3D.columns(centers=arrays.pos[sl], half_sizes=half_sizes, quaternions=quat)
         out.append((paths.cov, cov_index, cov_cols))
     return out
 
