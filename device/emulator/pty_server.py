@@ -68,6 +68,7 @@ class PtyShoeServer:
         resend_interval_s: lossless resend period (128 ms).
         mcu_id: 15 bytes answered to command 0x04.
         link_budget_bps: if set, never write faster than this many bytes per second.
+        temp_c: (n,) sensor temperature, °C, for the raw output's temperature block.
     """
 
     def __init__(
@@ -95,6 +96,7 @@ class PtyShoeServer:
         resend_interval_s: float = RESEND_INTERVAL_S,
         mcu_id: bytes | None = None,
         link_budget_bps: float | None = None,
+        temp_c: NDArray[np.float64] | None = None,
     ) -> None:
         if split_writes_max is not None and split_writes_max < 1:
             raise ValueError("split_writes_max must be >= 1")
@@ -118,6 +120,7 @@ class PtyShoeServer:
             tick0=tick0,
             first_packet_number=first_packet_number,
             resend_interval_s=resend_interval_s,
+            temp_c=temp_c,
             **extra,
         )
         """The emulated firmware (commands received, resends, ...); touch it only while stopped."""
