@@ -30,6 +30,7 @@ from app.live import new_session_id, open_capture
 from app.session import UnitAddress, open_unit_link
 from device import raw_imu
 from device.capture import CaptureReplayLink, CaptureWriter, UnitHeader, read_capture_info
+from device.emulator.icosahedron import MISCALIBRATED_MCU_ID as DEMO_MCU_ID
 from device.unit import Batch, ByteLink, OpenShoeUnit, RawImuMode
 from pipeline.calibration import PARAM_NAMES, STANDARD_GRAVITY_MPS2, TOLERANCE, CalibrationError, ImuCalibration
 from pipeline.calibration_procedure import MAX_FACES, FaceCollector
@@ -42,7 +43,6 @@ if TYPE_CHECKING:
 
 CAPTURE_MODE: Final = "calibration_raw_imu"
 """``settings.mode`` of a calibration capture's unit header."""
-DEMO_MCU_ID: Final = b"FNAV-CALIB-DEMO"
 BASE_RATE_HZ: Final = 1000.0
 IDLE_S: Final = 1.0
 

@@ -90,6 +90,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--pace", type=_pace, default=1.0, metavar="1x|Nx|max", help="emulator speed (default real time)"
     )
     demo.add_argument("--seed", type=int, default=1, help="random seed of the emulated sensor errors")
+    demo.add_argument(
+        "--miscalibrated",
+        action="store_true",
+        help="the emulated miscalibrated unit of `calibrate --demo` (its calibration applies if made)",
+    )
 
     live = sub.add_parser(
         "live", help="navigate one connected unit, or two (--left/--right), over USB serial or BLE"
@@ -380,6 +385,7 @@ def main(argv: list[str] | None = None) -> int:
                     web=args.web,
                     capture=bool(cfg["session.capture"]),
                     config=cfg,
+                    miscalibrated=args.miscalibrated,
                 )
             )
         if args.command == "live":

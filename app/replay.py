@@ -20,9 +20,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from app.calibration_store import StoredCalibration, calibration_dir, load_calibration
 from app.config import Config, apply_capture_settings
 from app.live import FootRun, foot_sinks, notice
-from app.session import run_unit_session
+from app.session import CalibrationLookup, run_unit_session
 from app.status import Progress, StatusLine
 from device.capture import EXPECTED, CaptureReplayLink, summarize_capture
 from device.unit import OpenShoeUnit
@@ -153,6 +154,23 @@ def run_replay(opts: ReplayOptions) -> int:
         for foot, events in summary.events.items()
     }
 
+    def lookup(foot: str) -> CalibrationLookup | None:
+        """The live session asked the unit its MCU id (an ``mcu_id`` event): ask again, from the capture."""
+        if not any(e.get("event") == "mcu_id" for e in summary.events.get(foot, [])):
+            return None
+        folder = calibration_dir(cfg)
+        apply = bool(cfg["calibration.apply"])
+        prefix = f"{foot}: " if len(feet) > 1 else ""
+
+        def find(mcu_id: bytes) -> StoredCalibration | None:
+            return load_calibration(folder, mcu_id) if apply else None
+
+        def report(mcu_id: bytes | None, stored: StoredCalibration | None, note: str) -> None:
+            if apply:
+                notice(prefix + note)
+
+        return CalibrationLookup(find=find, report=report)
+
     async def session(run: FootRun) -> None:
         link = links[run.foot]
         unit = OpenShoeUnit(link)
@@ -173,6 +191,7 @@ def run_replay(opts: ReplayOptions) -> int:
             idle_notice_s=None,
             window=(opts.start_s, opts.end_s) if windowed else None,
             on_window=lambda: setattr(link, "paced", True),
+            calibration=lookup(run.foot),
         )
 
     from app.live import run_feet

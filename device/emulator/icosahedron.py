@@ -31,6 +31,8 @@ from device.emulator.imu_errors import IMU_GRADES, corrupt
 F64 = NDArray[np.float64]
 
 STANDARD_GRAVITY_MPS2: Final = 9.80665
+MISCALIBRATED_MCU_ID: Final = b"FNAV-CALIB-DEMO"
+"""The 15-byte MCU id the emulated miscalibrated unit answers (``calibrate --demo``, ``demo --miscalibrated``)."""
 _PHI: Final = (1.0 + math.sqrt(5.0)) / 2.0
 
 
