@@ -33,7 +33,7 @@ from device.capture import CaptureReplayLink, CaptureWriter, UnitHeader, read_ca
 from device.emulator.icosahedron import MISCALIBRATED_MCU_ID as DEMO_MCU_ID
 from device.unit import Batch, ByteLink, OpenShoeUnit, RawImuMode
 from pipeline.calibration import PARAM_NAMES, STANDARD_GRAVITY_MPS2, TOLERANCE, CalibrationError, ImuCalibration
-from pipeline.calibration_procedure import MAX_FACES, FaceCollector
+from pipeline.calibration_procedure import CAPTURE_S, MAX_FACES, FaceCollector
 from pipeline.errors import FootnavError, InputFormatError
 
 if TYPE_CHECKING:
@@ -44,7 +44,11 @@ if TYPE_CHECKING:
 CAPTURE_MODE: Final = "calibration_raw_imu"
 """``settings.mode`` of a calibration capture's unit header."""
 BASE_RATE_HZ: Final = 1000.0
+BLE_RATE_DIVIDER: Final = 3
+"""Over BLE the raw output runs at 125 Hz: four IMUs with temperature are 66-byte packets, 66 kB/s at
+1 kHz, far more than a BLE link carries (about 16 kB/s at the minimum MTU)."""
 IDLE_S: Final = 1.0
+LOW_RATE_HOLD_S: Final = 8.0
 
 
 @dataclass(frozen=True)
@@ -53,6 +57,10 @@ class CalibrateOptions:
 
     Attributes:
         imu_mask: IMUs whose raw outputs are averaged (0x0F: a MIMU board's four).
+        rate_divider_log2: raw output every 2**k samples of the 1 kHz base rate (None: 0 on serial,
+            :data:`BLE_RATE_DIVIDER` over BLE).
+        hold_s: still time averaged per face (None: 2 s at 1 kHz, 8 s below 500 Hz: the divided raw
+            output is decimated, not averaged, so fewer samples need a longer hold for the same accuracy).
         allow_no_temperature: fit the 9-parameter model when the temperature is unobservable.
         capture: write a capture of the procedure into ``sessions.sessions_dir``.
         demo_pace: emulator speed (``math.inf``: as fast as read).
@@ -65,6 +73,8 @@ class CalibrateOptions:
     capture_file: Path | None = None
     demo: bool = False
     imu_mask: int = 0x0F
+    rate_divider_log2: int | None = None
+    hold_s: float | None = None
     allow_no_temperature: bool = False
     max_faces: int = MAX_FACES
     capture: bool = True
@@ -137,7 +147,7 @@ def _never() -> bool:
     return False
 
 
-def calibration_header(port: str, transport: str, imu_mask: int) -> UnitHeader:
+def calibration_header(port: str, transport: str, imu_mask: int, rate_divider_log2: int) -> UnitHeader:
     """The capture header of a calibration procedure (``settings.mode`` = :data:`CAPTURE_MODE`)."""
     return UnitHeader(
         foot="foot",
@@ -145,7 +155,12 @@ def calibration_header(port: str, transport: str, imu_mask: int) -> UnitHeader:
         command_set="openshoe (2015 set, 2014 probed)",
         transport=transport,
         port=port,
-        settings={"mode": CAPTURE_MODE, "imu_mask": imu_mask, "rate_hz": BASE_RATE_HZ},
+        settings={
+            "mode": CAPTURE_MODE,
+            "imu_mask": imu_mask,
+            "rate_divider_log2": rate_divider_log2,
+            "rate_hz": BASE_RATE_HZ / 2**rate_divider_log2,
+        },
     )
 
 
@@ -161,14 +176,17 @@ async def _procedure(
     _say(opts, f"unit {unit.link.name}: MCU id {result.mcu_id.hex()}")
     if capture is not None:
         capture.event("foot", "mcu_id", mcu_id=result.mcu_id.hex())
-    await unit.start(RawImuMode(opts.imu_mask, temperature=True))
+    divider = opts.rate_divider_log2 or 0
+    await unit.start(RawImuMode(opts.imu_mask, rate_divider_log2=divider, temperature=True))
+    rate_hz = BASE_RATE_HZ / 2**divider
+    hold_s = opts.hold_s if opts.hold_s is not None else (CAPTURE_S if rate_hz >= 500 else LOW_RATE_HOLD_S)
     collector = FaceCollector(
-        BASE_RATE_HZ, max_faces=opts.max_faces, allow_no_temperature=opts.allow_no_temperature
+        rate_hz, capture_s=hold_s, max_faces=opts.max_faces, allow_no_temperature=opts.allow_no_temperature
     )
     _say(
         opts,
-        f"put the unit in the icosahedron and hold it still on one face; {collector.min_faces} to "
-        f"{opts.max_faces} faces are needed",
+        f"put the unit in the icosahedron and hold it still on one face for {hold_s:g} s; "
+        f"{collector.min_faces} to {opts.max_faces} faces are needed",
     )
     batches = unit.batches()
     pending: asyncio.Future[Batch] | None = None
@@ -226,8 +244,12 @@ async def calibrate_session(opts: CalibrateOptions) -> CalibrateResult:
                     f"{opts.capture_file} is not a calibration capture (recorded by `footnav calibrate`); "
                     "its unit streamed no raw IMU output with temperature"
                 )
-            mask = int(info.units[0].settings.get("imu_mask", opts.imu_mask))
-            opts = dataclasses.replace(opts, imu_mask=mask)
+            settings = info.units[0].settings
+            opts = dataclasses.replace(
+                opts,
+                imu_mask=int(settings.get("imu_mask", opts.imu_mask)),
+                rate_divider_log2=int(settings.get("rate_divider_log2", 0)),
+            )
             link = CaptureReplayLink(capture_file, info.units[0].foot, speed=math.inf)
             _say(opts, f"calibrating from the capture {opts.capture_file}")
         else:
@@ -241,13 +263,18 @@ async def calibrate_session(opts: CalibrateOptions) -> CalibrateResult:
                 source_done = server.finished.is_set
                 _say(opts, f"demo: an emulated miscalibrated unit on {server.port} turns through the icosahedron")
             assert address is not None
+            if opts.rate_divider_log2 is None:
+                divider = BLE_RATE_DIVIDER if address.transport == "ble" else 0
+                opts = dataclasses.replace(opts, rate_divider_log2=divider)
             session_id = new_session_id("calibrate")
             capture = open_capture(
                 opts.config, session_id, enabled=opts.capture, extra={"command": "footnav calibrate"}
             )
             if capture is not None:
                 stack.callback(capture.close)
-                tap = capture.add_unit(calibration_header(str(address), transport, opts.imu_mask))
+                tap = capture.add_unit(
+                    calibration_header(str(address), transport, opts.imu_mask, opts.rate_divider_log2 or 0)
+                )
                 result.capture_path = capture.path
             link = await open_unit_link(address, capture=tap, ble_backend=opts.ble_backend)
         unit = OpenShoeUnit(link, capture=tap)

@@ -141,6 +141,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="IMUs whose raw outputs are averaged (default 0x0F: the four of a MIMU board)",
     )  # fmt: skip
     cal.add_argument(
+        "--rate-divider", type=int, default=None, choices=range(7), metavar="K",
+        help="raw output every 2**K samples of the 1 kHz base rate (default 0 on serial, 3: 125 Hz over BLE)",
+    )  # fmt: skip
+    cal.add_argument(
+        "--hold", type=_positive, default=None, metavar="S",
+        help="still time averaged per face (default 2 s at 1 kHz, 8 s at 125 Hz over BLE)",
+    )  # fmt: skip
+    cal.add_argument(
         "--no-temperature",
         action="store_true",
         help="if the temperature barely changes, fit the 9-parameter model without temperature terms",
@@ -308,6 +316,8 @@ def _calibrate(args: argparse.Namespace) -> int:
             capture_file=args.capture,
             demo=args.demo,
             imu_mask=args.imu_mask,
+            rate_divider_log2=args.rate_divider,
+            hold_s=args.hold,
             allow_no_temperature=args.no_temperature,
             capture=bool(cfg["session.capture"]),
             demo_pace=args.pace,
