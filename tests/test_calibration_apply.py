@@ -58,7 +58,7 @@ def tx_commands(path: Path) -> list[int]:
 
 def test_calibration_applied_live_and_in_replay(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cal_dir = tmp_path / "cal"
-    cal = calibrate_emulated(Miscalibration(), grade="mpu6500x4", seed=3)
+    cal, _ = calibrate_emulated(Miscalibration(), grade="mpu6500x4", seed=3)
     cal_path = save_calibration(cal_dir, MISCALIBRATED_MCU_ID, cal, source="test")
 
     nav_cal, err_cal = walk(config(tmp_path / "with", cal_dir))

@@ -12,7 +12,7 @@ from pipeline.calibration import TOLERANCE
 
 def test_calibrated_walk_beats_the_uncalibrated_one_side_by_side() -> None:
     errors = Miscalibration()
-    cal = calibrate_emulated(errors, grade="mpu6500x4", seed=3)
+    cal, _ = calibrate_emulated(errors, grade="mpu6500x4", seed=3)
     assert np.abs(cal.theta[0:3] - errors.theta_at(cal.t_ref_c)[0:3]).max() < TOLERANCE["scale"]
     rows, distance, (t0, t1) = compare_walk(cal, errors, path="rectangle", duration_s=40.0, grade="mpu6500x4", seed=3)
     raw, with_temp, at_ref, perfect = rows

@@ -42,8 +42,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=3, help="seed of the sensor noise")
 
 
-def calibrate_emulated(errors: Miscalibration, *, grade: str, seed: int) -> ImuCalibration:
-    """Run the procedure on the emulated unit (samples fed in 50 ms reads) and return the fit.
+def calibrate_emulated(errors: Miscalibration, *, grade: str, seed: int) -> tuple[ImuCalibration, tuple[float, float]]:
+    """Run the procedure on the emulated unit (samples fed in 50 ms reads): the fit and the temperature range.
 
     Raises:
         CalibrationError: the faces did not determine the calibration.
@@ -56,7 +56,7 @@ def calibrate_emulated(errors: Miscalibration, *, grade: str, seed: int) -> ImuC
     collector = FaceCollector(RATE_HZ)
     for a in range(0, len(truth), 50):
         collector.feed(truth.t_s[a : a + 50], acc[a : a + 50], gyr[a : a + 50], temp[a : a + 50])
-    return collector.finish()
+    return collector.finish(), (float(temp.min()), float(temp.max()))
 
 
 @dataclass(frozen=True, slots=True)
@@ -120,8 +120,11 @@ def _no_errors() -> Miscalibration:
 
 def run(args: argparse.Namespace) -> int:
     errors = Miscalibration()
-    cal = calibrate_emulated(errors, grade=args.grade, seed=args.seed)
-    print(f"calibration of the emulated unit ({args.grade}, icosahedron, 20 faces offered, warming 22 → 34 °C)")
+    cal, (c0, c1) = calibrate_emulated(errors, grade=args.grade, seed=args.seed)
+    print(
+        f"calibration of the emulated unit ({args.grade}, icosahedron, 20 faces offered, "
+        f"warming {c0:.1f} → {c1:.1f} °C)"
+    )
     for line in parameter_table(cal, errors):
         print(line)
     rows, distance, (t0, t1) = compare_walk(
