@@ -23,7 +23,7 @@ from app.status import FootStatus, StatusLine
 from device import links
 from device.links import LinkEvent, ReconnectingLink
 from device.unit import CaptureTap, LinkStats, OpenShoeUnit
-from pipeline.calibration import ImuCalibration
+from pipeline.calibration import CalibrationError, ImuCalibration
 from pipeline.errors import DeviceError
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import Navigator
@@ -75,8 +75,6 @@ class CalibrationLookup:
 
 async def _unit_calibration(unit: OpenShoeUnit, lookup: CalibrationLookup) -> StoredCalibration | None:
     """Ask the unit its MCU id and look its calibration up; failures are reported, never fatal."""
-    from pipeline.calibration import CalibrationError
-
     try:
         mcu_id = await unit.request_mcu_id(timeout_s=lookup.mcu_id_timeout_s)
     except DeviceError as exc:

@@ -60,6 +60,19 @@ def test_demo_procedure_over_the_pty_saves_the_units_calibration_and_its_capture
     np.testing.assert_array_equal(refit.calibration.theta, cal.theta)
 
 
+def test_an_undetermined_fit_is_refused_and_nothing_saved(tmp_path: Path) -> None:
+    """At 125 Hz (decimated raw output) 2 s holds give an eighth of the samples: 20 faces do not determine
+    the fit to the targets, and the procedure says so instead of saving a calibration."""
+    out = io.StringIO()
+    opts = CalibrateOptions(
+        config=_config(tmp_path), demo=True, demo_pace=math.inf, rate_divider_log2=3, hold_s=2.0, out=out
+    )
+    assert run_calibrate(opts) == 2
+    assert "[20/20 faces] the fit is not well determined yet" in out.getvalue()
+    assert "capture more faces, each still for longer" in out.getvalue()
+    assert not (tmp_path / "cal").exists()
+
+
 def test_a_non_calibration_capture_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "live.mcap"
     with CaptureWriter(path) as w:
