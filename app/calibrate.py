@@ -66,6 +66,8 @@ class CalibrateOptions:
         demo_pace: emulator speed (``math.inf``: as fast as read).
         out: where the procedure is narrated (tests pass a buffer).
         ble_backend: tests only: the bleak backend.
+        source_done: tests only: True once an emulated unit has sent everything (the procedure then
+            ends with the faces it has, as at the end of a capture).
     """
 
     config: Config
@@ -82,6 +84,7 @@ class CalibrateOptions:
     demo_seed: int = 3
     out: IO[str] | None = None
     ble_backend: BleBackend | None = None
+    source_done: Callable[[], bool] | None = None
 
 
 @dataclass
@@ -234,7 +237,7 @@ async def calibrate_session(opts: CalibrateOptions) -> CalibrateResult:
     with contextlib.ExitStack() as stack:
         capture: CaptureWriter | None = None
         tap = None
-        source_done: Callable[[], bool] = _never
+        source_done: Callable[[], bool] = opts.source_done or _never
         link: ByteLink
         capture_file = opts.capture_file
         if capture_file is not None:

@@ -461,6 +461,8 @@ def fit_calibration(
     has_temp = temp.size > 0 and bool(np.all(np.isfinite(temp)))
     spread = float(temp.max() - temp.min()) if has_temp else 0.0
     temperature_model = has_temp and spread >= MIN_TEMPERATURE_SPREAD_C
+    # too few faces first: more faces may also bring the temperature spread
+    check_faces(faces, MIN_FACES if (temperature_model or not allow_no_temperature) else MIN_FACES_NO_TEMPERATURE)
     if not temperature_model and not allow_no_temperature:
         why = (
             "the stream carries no temperature (use the raw IMU output with temperature)"
@@ -472,7 +474,6 @@ def fit_calibration(
             "warms up (start it cold, right after power-on), or accept the 9-parameter model without "
             "temperature terms (--no-temperature)"
         )
-    check_faces(faces, MIN_FACES if temperature_model else MIN_FACES_NO_TEMPERATURE)
     t_ref = float(temp.mean()) if has_temp else float("nan")
     dt = temp - t_ref if has_temp else np.zeros(len(acc))
     face_of = np.concatenate([np.full(len(f.acc_win_mps2), i) for i, f in enumerate(faces)])

@@ -91,3 +91,48 @@ def test_calibration_folder_from_config_env_xdg(tmp_path: Path, monkeypatch: pyt
     assert calibration_dir(cfg) == tmp_path / "env"
     cfg.set("calibration.dir", str(tmp_path / "cfg"), CLI)
     assert calibration_dir(cfg) == tmp_path / "cfg"
+
+
+async def test_over_ble_the_procedure_runs_at_125_hz_and_too_few_faces_are_refused(tmp_path: Path) -> None:
+    """The emulated unit as a BLE GATT peripheral on bumble's virtual radio, reached through bleak: the
+    MCU id, raw output with temperature at the BLE default of 125 Hz, three faces captured, then the
+    unit has nothing more to send and the fit refuses with what to redo."""
+    from bumble.link import LocalLink
+
+    from app.calibrate import calibrate_session
+    from app.session import UnitAddress
+    from device.emulator.ble_backend import BumbleAdapter, bumble_backend
+    from device.emulator.ble_peripheral import BleShoePeripheral
+    from device.emulator.icosahedron import miscalibrated_signals, simulate_icosahedron, warm_up_c
+    from pipeline.calibration import TooFewFacesError
+
+    truth = simulate_icosahedron(1000.0, n_faces=3)
+    temp = warm_up_c(truth.t_s)
+    acc, gyr = miscalibrated_signals(truth.acc_b_mps2, truth.gyr_b_radps, temp, 1000.0)
+    link = LocalLink()
+    adapter = BumbleAdapter(link)
+    unit = BleShoePeripheral(
+        link, truth.t_s, acc, gyr, name="FOOT-CAL", speed=math.inf, temp_c=temp, mcu_id=DEMO_MCU_ID
+    )
+    await unit.start()
+    out = io.StringIO()
+    opts = CalibrateOptions(
+        config=_config(tmp_path),
+        address=UnitAddress("ble", "FOOT-CAL"),
+        hold_s=2.0,
+        out=out,
+        ble_backend=bumble_backend(adapter, mtu=247),
+        source_done=unit.finished.is_set,
+    )
+    try:
+        with pytest.raises(TooFewFacesError, match=r"only 3 distinct faces.*9 more faces"):
+            await calibrate_session(opts)
+    finally:
+        await unit.stop()
+        await adapter.close()
+    text = out.getvalue()
+    assert f"MCU id {DEMO_MCU_ID.hex()}" in text and text.count("captured:") == 3
+    (capture,) = (tmp_path / "sessions").glob("calibrate-*.mcap")
+    from device.capture import read_capture_info
+
+    assert read_capture_info(capture).units[0].settings["rate_hz"] == 125.0
