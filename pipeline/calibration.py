@@ -36,8 +36,9 @@ References
   misalignment, the ``|u| = g`` cost on still periods).
 - Merat, P., et al. (the 15-parameter accelerometer model with K, L, B and temperature terms
   K_T, B_T, ``Y = K L U + (K_T U + B_T) T + B + w``), as used by the multi-sensor foot platform paper.
-- Coleman, T. F., Li, Y. (1996). An interior trust region approach for nonlinear minimization subject
-  to bounds. *SIAM J. Optim.* 6(2) (the "trf" method of ``scipy.optimize.least_squares``).
+- Branch, M. A., Coleman, T. F., Li, Y. (1999). A subspace, interior, and conjugate gradient method
+  for large-scale bound-constrained minimization problems. *SIAM J. Sci. Comput.* 21(1), 1-23 (the
+  trust-region-reflective "trf" method of ``scipy.optimize.least_squares``).
 """
 
 from __future__ import annotations

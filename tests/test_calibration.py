@@ -28,6 +28,8 @@ from pipeline.calibration import (
     TooFewFacesError,
     face_from_samples,
     fit_calibration,
+    forward_model,
+    invert_model,
 )
 from pipeline.calibration_procedure import FaceCollector, ProcedureEvent
 
@@ -70,6 +72,17 @@ def test_icosahedron_normals_are_twenty_unit_faces_41_8_deg_apart() -> None:
     np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0)
     cos = n @ n.T - 2 * np.eye(20)
     assert math.degrees(math.acos(cos.max())) == pytest.approx(41.81, abs=0.01)
+
+
+def test_model_inverts_and_the_truth_re_references_exactly() -> None:
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(50, 3)) * 9.8
+    temp = rng.uniform(15.0, 45.0, 50)
+    errors = Miscalibration()
+    y, _ = errors.apply(u, np.zeros((50, 3)), temp)
+    theta = errors.theta_at(27.0)
+    np.testing.assert_allclose(forward_model(theta, u, temp - 27.0), y, atol=1e-12)
+    np.testing.assert_allclose(invert_model(theta, y, temp - 27.0), u, atol=1e-12)
 
 
 def test_emulated_procedure_rests_on_each_face_and_turns_between(procedure: Procedure) -> None:

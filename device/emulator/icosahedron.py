@@ -13,7 +13,8 @@ warm-up temperature profile; white noise and in-run drift come from a grade of
 :mod:`.imu_errors` (without its turn-on biases: the miscalibration's biases are the known truth).
 
 References: the icosahedron face normals are the normalised vertices of the dual dodecahedron,
-``(±1, ±1, ±1), (0, ±1/φ, ±φ), (±1/φ, ±φ, 0), (±φ, 0, ±1/φ)`` (Coxeter, *Regular Polytopes*, 1973, §3.7).
+``(±1, ±1, ±1), (0, ±1/φ, ±φ), (±1/φ, ±φ, 0), (±φ, 0, ±1/φ)``, φ the golden ratio (Coxeter,
+*Regular Polytopes*, 3rd ed., 1973).
 """
 
 from __future__ import annotations
