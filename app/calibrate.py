@@ -138,6 +138,8 @@ def parameter_table(cal: ImuCalibration, truth: Miscalibration | None = None) ->
             tb = math.degrees(truth.gyr_bias_at(cal.t_ref_c)[j])
             line += f"{tb:>12.4f}{b - tb:>10.4f}{math.degrees(TOLERANCE['gyr_bias_radps']):>11.3f}"
         lines.append(line)
+    faces = " ".join(f"{1e3 * r:.2f}" for r in cal.face_residual_rms_mps2)
+    lines.append(f"residual RMS per face, mm/s²: {faces}")
     temp = f"reference temperature {cal.t_ref_c:.2f} °C" if cal.temperature_model else "no temperature terms"
     lines.append(
         f"k: scale − 1; l: misalignment; b: bias at the reference; {temp}; residual RMS "

@@ -100,6 +100,11 @@ def run_replay(opts: ReplayOptions) -> int:
     if not any(summary.rx_bytes.values()):
         cut = "ends before its first complete chunk of data" if summary.truncated else "holds no data from a unit"
         raise InputFormatError(f"{opts.path} {cut}; nothing to replay")
+    if any(u.settings.get("mode") == "calibration_raw_imu" for u in info.units):
+        raise InputFormatError(
+            f"{opts.path} is a calibration procedure (raw IMU output); refit it with "
+            f"`footnav calibrate --capture {opts.path}`"
+        )
     if summary.truncated:
         notice(f"{opts.path} ends mid-record (the writer was killed?): replaying what is there")
     cfg = opts.config

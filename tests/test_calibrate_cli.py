@@ -55,6 +55,9 @@ def test_demo_procedure_over_the_pty_saves_the_units_calibration_and_its_capture
     cfg2 = _config(tmp_path)
     cfg2.set("calibration.dir", str(tmp_path / "cal2"), CLI)
     assert run_calibrate(CalibrateOptions(config=cfg2, capture_file=captures[0], out=again)) == 0
+    assert "residual RMS per face, mm/s²:" in text
+    # a calibration capture is not a walk: replay says how to use it
+    assert main(["replay", str(captures[0]), "--no-viewer"]) == 2
     refit = load_calibration(tmp_path / "cal2", DEMO_MCU_ID)
     assert refit is not None
     np.testing.assert_array_equal(refit.calibration.theta, cal.theta)
