@@ -302,7 +302,11 @@ async def calibrate_session(opts: CalibrateOptions) -> CalibrateResult:
     assert result.mcu_id is not None
     folder = calibration_dir(opts.config)
     source = "demo (emulated unit)" if opts.demo else str(opts.capture_file or opts.address)
-    result.path = save_calibration(folder, result.mcu_id, result.calibration, source=source)
+    stream = (
+        f"raw IMU 0x28, IMU mask 0x{opts.imu_mask:02X}, {BASE_RATE_HZ / 2 ** (opts.rate_divider_log2 or 0):g} Hz"
+        + (", with temperature" if result.calibration.temperature_model else "")
+    )
+    result.path = save_calibration(folder, result.mcu_id, result.calibration, source=source, stream=stream)
     _say(opts, f"saved {result.path}: applied whenever this unit connects or its capture is replayed")
     return result
 

@@ -7,10 +7,16 @@ File ``<mcu id hex>.json``::
 
     {"format": "footnav-calibration", "mcu_id": "464e4156...", "created_utc": "...",
      "footnav_version": "...", "source": "how it was made",
+     "stream": "which output the fit was made on, e.g. raw IMU 0x28, IMU mask 0x0F, with temperature",
      "calibration": {model_version, parameters, 1σ, residual RMS, ... (ImuCalibration.to_dict)}}
 
 JSON rather than TOML: the standard library writes it (``tomllib`` only reads), and the file is
 written by footnav, not by hand.
+
+The fit is made on the raw IMU registers (0x28) and applied to the calibrated-IMU stream (0x40) that
+sessions navigate. The two agree on units whose firmware applies no calibration of its own (low-cost
+units, the emulated one); on a factory-calibrated board the 0x40 output is already corrected, and
+``calibration.apply = false`` should be set for it.
 """
 
 from __future__ import annotations
@@ -58,6 +64,7 @@ class StoredCalibration:
     created_utc: str
     source: str
     calibration: ImuCalibration
+    stream: str = ""
 
     def describe(self) -> str:
         """One line for the terminal: which file, when, how good."""
@@ -68,12 +75,15 @@ class StoredCalibration:
             else "no temperature terms (9-parameter model)"
         )
         return (
-            f"calibration {self.path} (MCU id {self.mcu_id}, {self.created_utc}, {cal.n_faces} faces, "
+            f"calibration {self.path} (MCU id {self.mcu_id}, {self.created_utc}, fitted on {self.stream or '?'}, "
+            f"{cal.n_faces} faces, "
             f"residual RMS {1e3 * cal.residual_rms_mps2:.2f} mm/s², {temp})"
         )
 
 
-def save_calibration(folder: Path, mcu_id: bytes, calibration: ImuCalibration, *, source: str) -> Path:
+def save_calibration(
+    folder: Path, mcu_id: bytes, calibration: ImuCalibration, *, source: str, stream: str = ""
+) -> Path:
     """Write (or replace) the unit's calibration file atomically; returns its path.
 
     Raises:
@@ -87,6 +97,7 @@ def save_calibration(folder: Path, mcu_id: bytes, calibration: ImuCalibration, *
         "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "footnav_version": footnav_version(),
         "source": source,
+        "stream": stream,
         "calibration": calibration.to_dict(),
     }
     tmp = path.with_suffix(".json.tmp")
@@ -116,6 +127,7 @@ def load_calibration(folder: Path, mcu_id: bytes) -> StoredCalibration | None:
         created_utc=str(doc.get("created_utc", "?")),
         source=str(doc.get("source", "")),
         calibration=ImuCalibration.from_dict(doc["calibration"]),
+        stream=str(doc.get("stream", "")),
     )
 
 
