@@ -90,6 +90,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--pace", type=_pace, default=1.0, metavar="1x|Nx|max", help="emulator speed (default real time)"
     )
     demo.add_argument("--seed", type=int, default=1, help="random seed of the emulated sensor errors")
+    demo.add_argument(
+        "--miscalibrated",
+        action="store_true",
+        help="the emulated miscalibrated unit of `calibrate --demo` (its calibration applies if made)",
+    )
 
     live = sub.add_parser(
         "live", help="navigate one connected unit, or two (--left/--right), over USB serial or BLE"
@@ -115,6 +120,45 @@ def build_parser() -> argparse.ArgumentParser:
         help="output every 2**K samples of the 1 kHz base rate (default 0: 1 kHz on serial, 2: 250 Hz on BLE)",
     )
     _add_output_args(live, capture=True)
+
+    cal = sub.add_parser(
+        "calibrate",
+        help="field calibration of the unit's IMU (icosahedron procedure); saved by MCU id, applied automatically",
+    )
+    cal_src = cal.add_mutually_exclusive_group(required=True)
+    cal_src.add_argument("--port", help="serial port of the unit, e.g. /dev/ttyACM0")
+    cal_src.add_argument(
+        "--ble", nargs="?", const="", metavar="NAME|ADDRESS", help="the unit over Bluetooth LE (alone: the first found)"
+    )
+    cal_src.add_argument(
+        "--capture", type=Path, metavar="FILE", help="fit from a capture recorded by an earlier `footnav calibrate`"
+    )
+    cal_src.add_argument(
+        "--demo", action="store_true", help="an emulated miscalibrated unit that turns through the faces by itself"
+    )
+    cal.add_argument(
+        "--imu-mask", type=lambda t: int(t, 0), default=0x0F, metavar="MASK",
+        help="IMUs whose raw outputs are averaged (default 0x0F: the four of a MIMU board)",
+    )  # fmt: skip
+    cal.add_argument(
+        "--rate-divider", type=int, default=None, choices=range(7), metavar="K",
+        help="raw output every 2**K samples of the 1 kHz base rate (default 0 on serial, 3: 125 Hz over BLE)",
+    )  # fmt: skip
+    cal.add_argument(
+        "--hold", type=_positive, default=None, metavar="S",
+        help="still time averaged per face (default 2 s at 1 kHz, 8 s at 125 Hz over BLE)",
+    )  # fmt: skip
+    cal.add_argument(
+        "--no-temperature",
+        action="store_true",
+        help="if the temperature barely changes, fit the 9-parameter model without temperature terms",
+    )
+    cal.add_argument(
+        "--pace", type=_pace, default=10.0, metavar="1x|Nx|max", help="--demo: emulator speed (default 10x)"
+    )
+    cal.add_argument("--sessions", type=Path, metavar="DIR", help="capture folder (default: ./sessions)")
+    cal.add_argument("--no-capture", action="store_true", help="do not write a capture of the procedure")
+    _add_config_args(cal, profile=False)
 
     scan = sub.add_parser("scan", help="list serial ports and BLE devices that look like shoe units")
     scan.add_argument(
@@ -255,6 +299,32 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
     )
 
 
+def _calibrate(args: argparse.Namespace) -> int:
+    from app.calibrate import CalibrateOptions, run_calibrate
+    from app.session import UnitAddress
+
+    cfg = _config(args)
+    address = None
+    if args.port:
+        address = UnitAddress.parse(args.port)
+    elif args.ble is not None:
+        address = UnitAddress("ble", args.ble or None)
+    return run_calibrate(
+        CalibrateOptions(
+            config=cfg,
+            address=address,
+            capture_file=args.capture,
+            demo=args.demo,
+            imu_mask=args.imu_mask,
+            rate_divider_log2=args.rate_divider,
+            hold_s=args.hold,
+            allow_no_temperature=args.no_temperature,
+            capture=bool(cfg["session.capture"]),
+            demo_pace=args.pace,
+        )
+    )
+
+
 def _scan(args: argparse.Namespace) -> int:
     """Serial ports and BLE units that look like shoe units; without Bluetooth, one line says so."""
     import asyncio
@@ -325,12 +395,15 @@ def main(argv: list[str] | None = None) -> int:
                     web=args.web,
                     capture=bool(cfg["session.capture"]),
                     config=cfg,
+                    miscalibrated=args.miscalibrated,
                 )
             )
         if args.command == "live":
             return _live(args, argv)
         if args.command == "scan":
             return _scan(args)
+        if args.command == "calibrate":
+            return _calibrate(args)
         if args.command == "replay":
             return _replay(args)
         if args.command == "config":

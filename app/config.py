@@ -19,6 +19,11 @@ The file (TOML, read with :mod:`tomllib`)::
     threshold = 25.0
     window_s = 0.01
 
+    [calibration]
+    dir = ""                    # calibration files (default: $FOOTNAV_CALIBRATION_DIR, else
+                                # $XDG_CONFIG_HOME/footnav/calibration, else ~/.config/footnav/calibration)
+    apply = true                # apply a unit's calibration file when it connects or its capture replays
+
     [profiles.myshoe]           # a unit profile: a built-in base plus pipeline.profiles.UnitProfile fields
     base = "mpu6500x4"
     gyr_bias_init_radps = 0.003
@@ -48,6 +53,7 @@ CLI = "command line"
 
 _SESSION_DEFAULTS: dict[str, Any] = {"sessions_dir": DEFAULT_SESSIONS_DIR, "capture": True}
 _UNIT_DEFAULTS: dict[str, Any] = {"profile": "mpu6500x4", "rate_divider": 0}
+_CALIBRATION_DEFAULTS: dict[str, Any] = {"dir": "", "apply": True}
 _FILTER_FIELDS = {f.name: f for f in dataclasses.fields(NavConfig) if f.name not in ("profile", "detector")}
 _DETECTOR_CLS = type(NavConfig().detector)
 """The detector settings dataclass of ``NavConfig.detector`` (pipeline.detectors)."""
@@ -178,6 +184,8 @@ def defaults() -> Config:
         values[f"session.{k}"] = Setting(v, DEFAULT)
     for k, v in _UNIT_DEFAULTS.items():
         values[f"unit.{k}"] = Setting(v, DEFAULT)
+    for k, v in _CALIBRATION_DEFAULTS.items():
+        values[f"calibration.{k}"] = Setting(v, DEFAULT)
     for k in _FILTER_FIELDS:
         values[f"filter.{k}"] = Setting(getattr(nav, k), DEFAULT)
     for k in _DETECTOR_FIELDS:
@@ -187,7 +195,7 @@ def defaults() -> Config:
 
 
 def _apply_table(cfg: Config, data: dict[str, Any], source: str, where: str) -> None:
-    for section in ("session", "unit", "filter", "detector"):
+    for section in ("session", "unit", "calibration", "filter", "detector"):
         table = data.get(section, {})
         if not isinstance(table, dict):
             raise ConfigError(f"{where}: [{section}] must be a table")
@@ -220,11 +228,11 @@ def _apply_table(cfg: Config, data: dict[str, Any], source: str, where: str) -> 
                 )
             changes[key] = _coerce(f"profiles.{name}.{key}", value, getattr(base, key), where)
         cfg.profiles[name] = (dataclasses.replace(base, **changes), f"{source} [profiles.{name}], base {base_name}")
-    unknown = set(data) - {"session", "unit", "filter", "detector", "profiles"}
+    unknown = set(data) - {"session", "unit", "calibration", "filter", "detector", "profiles"}
     if unknown:
         raise ConfigError(
             f"{where}: unknown section(s) {', '.join(sorted(unknown))}; "
-            "known: session, unit, filter, detector, profiles"
+            "known: session, unit, calibration, filter, detector, profiles"
         )
 
 

@@ -2,6 +2,10 @@
 
 emulator (gait model + IMU errors) -> pty -> device layer -> pipeline -> Rerun, then a summary with
 the distance walked and the final position error against the emulator's ground truth.
+
+``--miscalibrated``: the shoe is the emulated miscalibrated unit of ``footnav calibrate --demo`` (same
+MCU id, scale factors, misalignment, biases and temperature terms, warming up during the walk); its
+calibration file, if ``calibrate --demo`` made one, is applied as for any unit that connects.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from app.live import (
     FOOT_START_OFFSET_M,
     FootRun,
     attach_unit,
+    calibration_lookup,
     finish_capture,
     foot_sinks,
     link_reporter,
@@ -34,6 +39,7 @@ from app.live import (
 from app.session import SerialSessionResult, run_serial_session
 from app.status import StatusLine
 from device.emulator.gait import GaitTruth, simulate_walk
+from device.emulator.icosahedron import MISCALIBRATED_MCU_ID, miscalibrated_signals, warm_up_c
 from device.emulator.imu_errors import IMU_GRADES, corrupt
 from device.emulator.pty_server import PtyShoeServer
 from pipeline.navigator import Navigator
@@ -73,6 +79,8 @@ class DemoOptions:
     """Sessions folder, filter and detector settings (default: built-in; the profile follows the grade)."""
     collect: Callable[[str], NavSink] | None = None
     """Tests: an extra NavSink per foot (given the foot name)."""
+    miscalibrated: bool = False
+    """The shoe is the emulated miscalibrated unit (see the module docstring)."""
 
 
 @dataclass(frozen=True)
@@ -113,6 +121,12 @@ def demo_truth(opts: DemoOptions, foot_index: int) -> tuple[GaitTruth, NDArray[n
     """Ground truth and corrupted IMU signals of one emulated foot (the second foot: same walk, own
     sensor errors)."""
     truth = simulate_walk(opts.path, opts.duration_s, rate_hz=1000.0, speed_mps=opts.speed_mps, seed=opts.seed)
+    if opts.miscalibrated:
+        temp = warm_up_c(truth.t_s, start_c=32.0, end_c=42.0, time_constant_s=120.0)
+        acc, gyr = miscalibrated_signals(
+            truth.acc_b_mps2, truth.gyr_b_radps, temp, truth.rate_hz, grade=opts.grade, seed=opts.seed + foot_index
+        )
+        return truth, acc, gyr
     acc, gyr, _ = corrupt(
         truth.acc_b_mps2, truth.gyr_b_radps, truth.rate_hz, IMU_GRADES[opts.grade], seed=opts.seed + foot_index
     )
@@ -150,7 +164,10 @@ def run_demo(opts: DemoOptions) -> int:
         views.log_event(
             f"demo: {opts.path}, {opts.duration_s:.0f} s, grade {opts.grade}, feet {', '.join(feet)}", t_s=0.0
         )
-    servers = [PtyShoeServer(t.t_s, acc, gyr, speed=opts.realtime, record=False) for t, acc, gyr in truths]
+    mcu_id = MISCALIBRATED_MCU_ID if opts.miscalibrated else None
+    servers = [
+        PtyShoeServer(t.t_s, acc, gyr, speed=opts.realtime, record=False, mcu_id=mcu_id) for t, acc, gyr in truths
+    ]
     extra = {"command": "footnav demo", "emulator": f"{opts.path} {opts.grade}"}
     capture = open_capture(cfg, session_id, enabled=opts.capture, extra=extra)
     status = StatusLine(feet=feet)
@@ -183,6 +200,7 @@ def run_demo(opts: DemoOptions) -> int:
             capture=run.tap,
             on_open=lambda unit: attach_unit(run, unit),
             on_link_event=link_reporter(run, views, capture, two_feet=two),
+            calibration=calibration_lookup(cfg, run.foot, capture, views, two_feet=two),
         )
 
     interrupted = False

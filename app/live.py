@@ -25,8 +25,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from app.calibration_store import StoredCalibration, any_calibrations, calibration_dir, load_calibration
 from app.config import DEFAULT, Config
-from app.session import LinkHealth, SerialSessionResult, UnitAddress, run_device_session
+from app.session import CalibrationLookup, LinkHealth, SerialSessionResult, UnitAddress, run_device_session
 from app.status import StatusLine
 from device.capture import CaptureTap, CaptureWriter, UnitHeader
 from device.links import LinkEvent, LinkGap, ReconnectingLink
@@ -175,6 +176,42 @@ def link_reporter(
             capture.event(run.foot, "link", kind=event.kind, message=event.message, **gap_fields(event.gap))
 
     return report
+
+
+def calibration_lookup(
+    config: Config,
+    foot: str,
+    capture: CaptureWriter | None,
+    views: SessionViews | None,
+    *,
+    two_feet: bool,
+) -> CalibrationLookup | None:
+    """Apply the unit's calibration file (by MCU id) when it connects, if ``calibration.apply``.
+
+    Only when the calibration folder holds a file is the unit asked its MCU id (so sessions without any
+    calibration talk to the unit exactly as before). The outcome is a notice on the terminal, a text
+    event in the recording and an ``mcu_id`` event in the capture (replay repeats the exchange from it).
+    """
+    if not config["calibration.apply"]:
+        return None
+    folder = calibration_dir(config)
+    if not any_calibrations(folder):
+        return None
+    prefix = f"{foot}: " if two_feet else ""
+
+    def report(mcu_id: bytes | None, stored: StoredCalibration | None, note: str) -> None:
+        notice(prefix + note)
+        if views is not None:
+            views.log_event(prefix + note)
+        if capture is not None:
+            capture.event(
+                foot,
+                "mcu_id",
+                mcu_id=None if mcu_id is None else mcu_id.hex(),
+                calibration=None if stored is None else str(stored.path),
+            )
+
+    return CalibrationLookup(find=lambda mcu_id: load_calibration(folder, mcu_id), report=report)
 
 
 def attach_unit(run: FootRun, unit: OpenShoeUnit) -> None:
@@ -338,6 +375,7 @@ async def live_session(opts: LiveOptions) -> int:
             on_open=lambda unit: attach_unit(run, unit),
             on_link_event=link_reporter(run, views, capture, two_feet=two_feet),
             ble_backend=opts.ble_backend,
+            calibration=calibration_lookup(cfg, run.foot, capture, views, two_feet=two_feet),
         )
 
     if views is not None:

@@ -20,9 +20,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from app.calibration_store import StoredCalibration, calibration_dir, load_calibration
 from app.config import Config, apply_capture_settings
 from app.live import FootRun, foot_sinks, notice
-from app.session import run_unit_session
+from app.session import CalibrationLookup, run_unit_session
 from app.status import Progress, StatusLine
 from device.capture import EXPECTED, CaptureReplayLink, summarize_capture
 from device.unit import OpenShoeUnit
@@ -99,6 +100,11 @@ def run_replay(opts: ReplayOptions) -> int:
     if not any(summary.rx_bytes.values()):
         cut = "ends before its first complete chunk of data" if summary.truncated else "holds no data from a unit"
         raise InputFormatError(f"{opts.path} {cut}; nothing to replay")
+    if any(u.settings.get("mode") == "calibration_raw_imu" for u in info.units):
+        raise InputFormatError(
+            f"{opts.path} is a calibration procedure (raw IMU output); refit it with "
+            f"`footnav calibrate --capture {opts.path}`"
+        )
     if summary.corrupt_at is not None:
         notice(
             f"{opts.path} is corrupt after byte {summary.corrupt_at} of {opts.path.stat().st_size}: "
@@ -158,6 +164,23 @@ def run_replay(opts: ReplayOptions) -> int:
         for foot, events in summary.events.items()
     }
 
+    def lookup(foot: str) -> CalibrationLookup | None:
+        """The live session asked the unit its MCU id (an ``mcu_id`` event): ask again, from the capture."""
+        if not any(e.get("event") == "mcu_id" for e in summary.events.get(foot, [])):
+            return None
+        folder = calibration_dir(cfg)
+        apply = bool(cfg["calibration.apply"])
+        prefix = f"{foot}: " if len(feet) > 1 else ""
+
+        def find(mcu_id: bytes) -> StoredCalibration | None:
+            return load_calibration(folder, mcu_id) if apply else None
+
+        def report(mcu_id: bytes | None, stored: StoredCalibration | None, note: str) -> None:
+            if apply:
+                notice(prefix + note)
+
+        return CalibrationLookup(find=find, report=report)
+
     async def session(run: FootRun) -> None:
         link = links[run.foot]
         unit = OpenShoeUnit(link)
@@ -178,6 +201,7 @@ def run_replay(opts: ReplayOptions) -> int:
             idle_notice_s=None,
             window=(opts.start_s, opts.end_s) if windowed else None,
             on_window=lambda: setattr(link, "paced", True),
+            calibration=lookup(run.foot),
         )
 
     from app.live import run_feet
@@ -198,6 +222,12 @@ def run_replay(opts: ReplayOptions) -> int:
                 notice(note)
     if interrupted:
         print("interrupted: the recording was closed", file=sys.stderr)
+    corrupt = [link.state.corrupt_at for link in links.values() if link.state.corrupt_at is not None]
+    if corrupt and summary.corrupt_at is None:  # found by the replay itself (the index looked whole)
+        notice(
+            f"{opts.path} is corrupt after byte {min(corrupt)} of {opts.path.stat().st_size}: "
+            "replayed what comes before"
+        )
     for run in runs:
         prefix = f"{run.foot}: " if len(runs) > 1 else ""
         st = run.navigator.stats

@@ -23,6 +23,7 @@ from app.status import FootStatus, StatusLine
 from device import links
 from device.links import LinkEvent, ReconnectingLink
 from device.unit import CaptureTap, LinkStats, OpenShoeUnit
+from pipeline.calibration import CalibrationError, ImuCalibration
 from pipeline.errors import DeviceError
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import Navigator
@@ -30,6 +31,7 @@ from pipeline.runner import NavSink, run_pipeline
 from pipeline.samples import ImuBatch
 
 if TYPE_CHECKING:
+    from app.calibration_store import StoredCalibration
     from device.ble_link import BleBackend
 
 log = logging.getLogger(__name__)
@@ -53,6 +55,45 @@ class SerialSessionResult:
     """Samples handed to the pipeline (a replay of the capture stops after as many)."""
     link_health: links.LinkHealth | None = None
     """Reconnects, stalls and gaps of a live unit's link (None for a replay)."""
+
+
+@dataclass(frozen=True)
+class CalibrationLookup:
+    """How a session finds the connected unit's calibration and tells the user.
+
+    Before the unit is started it is asked its MCU id (``OpenShoeUnit.request_mcu_id``); ``find(mcu_id)``
+    returns its calibration file or None (and may raise ``CalibrationError`` for an unreadable one);
+    ``report(mcu_id, stored, note)`` is told the outcome (``mcu_id`` None: the unit did not answer).
+    The calibration then corrects every batch before the navigator (at its reference temperature:
+    the calibrated-IMU stream 0x40 carries no temperature).
+    """
+
+    find: Callable[[bytes], StoredCalibration | None]
+    report: Callable[[bytes | None, StoredCalibration | None, str], None]
+    mcu_id_timeout_s: float = 1.0
+
+
+async def _unit_calibration(unit: OpenShoeUnit, lookup: CalibrationLookup) -> StoredCalibration | None:
+    """Ask the unit its MCU id and look its calibration up; failures are reported, never fatal."""
+    try:
+        mcu_id = await unit.request_mcu_id(timeout_s=lookup.mcu_id_timeout_s)
+    except DeviceError as exc:
+        lookup.report(None, None, f"{exc}; navigating without a calibration file")
+        return None
+    try:
+        stored = lookup.find(mcu_id)
+    except CalibrationError as exc:
+        lookup.report(mcu_id, None, f"{exc}; navigating without it")
+        return None
+    if stored is None:
+        note = f"no calibration file for the unit (MCU id {mcu_id.hex()}); `footnav calibrate` makes one"
+    else:
+        note = (
+            f"applying {stored.describe()}; the 0x40 stream carries no temperature, so the model is "
+            "evaluated at its reference temperature"
+        )
+    lookup.report(mcu_id, stored, note)
+    return stored
 
 
 @dataclass(frozen=True, slots=True)
@@ -231,6 +272,12 @@ async def _session_samples(
                     await pending
 
 
+async def _corrected(samples: AsyncIterator[ImuBatch], calibration: ImuCalibration) -> AsyncIterator[ImuBatch]:
+    """The calibration stage before the navigator: every batch corrected (no temperature in the stream)."""
+    async for batch in samples:
+        yield calibration.correct(batch)
+
+
 async def run_serial_session(
     port: str,
     navigator: Navigator,
@@ -245,6 +292,7 @@ async def run_serial_session(
     capture: CaptureTap | None = None,
     on_open: Callable[[OpenShoeUnit], None] | None = None,
     on_link_event: Callable[[LinkEvent], None] | None = None,
+    calibration: CalibrationLookup | None = None,
 ) -> SerialSessionResult:
     """:func:`run_device_session` on the serial port ``port``."""
     return await run_device_session(
@@ -260,6 +308,7 @@ async def run_serial_session(
         capture=capture,
         on_open=on_open,
         on_link_event=on_link_event,
+        calibration=calibration,
     )
 
 
@@ -278,6 +327,7 @@ async def run_device_session(
     on_open: Callable[[OpenShoeUnit], None] | None = None,
     on_link_event: Callable[[LinkEvent], None] | None = None,
     ble_backend: BleBackend | None = None,
+    calibration: CalibrationLookup | None = None,
 ) -> SerialSessionResult:
     """Open the unit at ``address`` through a :class:`~device.links.ReconnectingLink`, start its IMU
     stream, navigate until the stream ends or the task is cancelled (Ctrl-C), then stop the unit and
@@ -291,7 +341,9 @@ async def run_device_session(
     ``result`` (optional) is filled in as the session goes, so an interrupted session still has one.
     ``capture`` sees every byte read and written (the capture file), including the start commands the
     link re-sends on its own; ``on_open`` is called with the unit once the link is open;
-    ``ble_backend``: the bleak backend for BLE units (None: the platform's; tests pass bumble's).
+    ``ble_backend``: the bleak backend for BLE units (None: the platform's; tests pass bumble's);
+    ``calibration``: look the unit's calibration file up by its MCU id and apply it (see
+    :class:`CalibrationLookup`).
 
     Raises:
         DeviceError: the port does not exist or is busy, no Bluetooth stack, the unit is not found or
@@ -311,6 +363,7 @@ async def run_device_session(
         on_idle=on_idle,
         status=status,
         result=result,
+        calibration=calibration,
     )
 
 
@@ -330,10 +383,13 @@ async def run_unit_session(
     idle_notice_s: float | None = IDLE_NOTICE_S,
     window: tuple[float, float] | None = None,
     on_window: Callable[[], None] | None = None,
+    calibration: CalibrationLookup | None = None,
 ) -> SerialSessionResult:
     """Navigate an open unit's stream (see :func:`run_serial_session`); ``start=False`` for a replay,
     where the captured bytes already hold the start and no stop is sent; ``idle_notice_s=None`` never
-    treats a pause as idle (replays); ``window``: see ``_session_samples``. Closes the unit."""
+    treats a pause as idle (replays); ``window``: see ``_session_samples``; ``calibration``: ask the
+    unit its MCU id before the start and apply its calibration file (a replay passes one only when the
+    capture holds that exchange). Closes the unit."""
     result = result if result is not None else SerialSessionResult()
     name = unit.link.name
 
@@ -354,9 +410,12 @@ async def run_unit_session(
         if status is not None:
             status.reconnects = lambda: link.health.reconnects
     try:
+        stored = None
+        if start and calibration is not None:
+            stored = await _unit_calibration(unit, calibration)
         if start:
             await unit.start_imu_stream(rate_divider_log2)
-        samples = _session_samples(
+        samples: AsyncIterator[ImuBatch] = _session_samples(
             unit,
             result,
             expect_samples,
@@ -367,6 +426,8 @@ async def run_unit_session(
             window,
             on_window,
         )
+        if stored is not None:
+            samples = _corrected(samples, stored.calibration)
         await run_pipeline(samples, navigator, [*sinks, keep_last])
     finally:
         result.link = unit.stats

@@ -35,6 +35,10 @@ ACC_LSB_PER_G: Final = 2048.0
 GYR_LSB_PER_DPS: Final = 16.4
 ACC_SCALE_MPS2_PER_LSB: Final = STANDARD_GRAVITY_MPS2 / ACC_LSB_PER_G
 GYR_SCALE_RADPS_PER_LSB: Final = math.radians(1.0) / GYR_LSB_PER_DPS
+TEMP_LSB_PER_DEGC: Final = 333.87
+"""MPU-6500 temperature sensitivity, LSB/°C (datasheet PS-MPU-6500A-01: TEMP_degC = TEMP_OUT / 333.87 + 21)."""
+TEMP_OFFSET_DEGC: Final = 21.0
+"""MPU-6500 temperature at TEMP_OUT = 0 (room-temperature offset 0 LSB), °C."""
 DUAL_IMU_MASK: Final = 0b11
 """The dual-IMU board: IMUs 0 and 1 on one PCB, a fixed 1–2 cm apart."""
 
@@ -167,6 +171,17 @@ def decode_payloads(payloads: bytes | bytearray | memoryview, layout: RawImuLayo
         temperature_raw=rec["temp"].astype(np.int16) if layout.temperature else None,
         mag_raw=rec["mag"].astype(np.int16) if layout.magnetometer else None,
     )
+
+
+def temperature_c(temperature_raw: NDArray[np.integer]) -> NDArray[np.float64]:
+    """Raw temperature registers -> °C (MPU-6500 scale, :data:`TEMP_LSB_PER_DEGC`)."""
+    return np.asarray(temperature_raw, dtype=np.float64) / TEMP_LSB_PER_DEGC + TEMP_OFFSET_DEGC
+
+
+def temperature_registers(temp_c: NDArray[np.floating]) -> NDArray[np.int16]:
+    """°C -> raw temperature registers, rounded and saturated (inverse of :func:`temperature_c`)."""
+    raw = np.rint((np.asarray(temp_c, dtype=np.float64) - TEMP_OFFSET_DEGC) * TEMP_LSB_PER_DEGC)
+    return np.clip(raw, -32768, 32767).astype(np.int16)
 
 
 def si_to_registers(acc_b_mps2: NDArray[np.floating], gyr_b_radps: NDArray[np.floating]) -> NDArray[np.int16]:

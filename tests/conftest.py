@@ -15,3 +15,9 @@ def shared_data() -> Path:
     if not (SHARED_DATA / "DATA.md").exists():
         pytest.skip(f"real recordings not found at {SHARED_DATA} (the shared/ folder beside the checkout)")
     return SHARED_DATA
+
+
+@pytest.fixture(autouse=True)
+def _isolated_calibration_dir(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> None:
+    """No test sees the user's calibration files (``$FOOTNAV_CALIBRATION_DIR`` -> an empty folder)."""
+    monkeypatch.setenv("FOOTNAV_CALIBRATION_DIR", str(tmp_path_factory.mktemp("calibration")))

@@ -92,6 +92,8 @@ class ShoeFirmware:
         first_packet_number: package number of the first packet.
         resend_interval_s: lossless resend period.
         mcu_id: the 15 bytes answered to 0x04.
+        temp_c: (n,) sensor temperature, °C, sent in the raw output's temperature block (default: a
+            constant 24 °C, the register value 1000).
     """
 
     def __init__(
@@ -112,6 +114,7 @@ class ShoeFirmware:
         first_packet_number: int = 1,
         resend_interval_s: float = RESEND_INTERVAL_S,
         mcu_id: bytes = DEFAULT_MCU_ID,
+        temp_c: F64 | None = None,
     ) -> None:
         self._t = np.asarray(t_s, dtype=np.float64)
         n = self._t.shape[0]
@@ -132,6 +135,12 @@ class ShoeFirmware:
         if not speed > 0:
             raise ValueError(f"speed must be > 0 (math.inf for as fast as possible), got {speed}")
         self.n_imus = int(imu_acc.shape[1])
+        if temp_c is None:
+            self._temp_raw = np.full(n, 1000, dtype=np.int16)
+        else:
+            if np.shape(temp_c) != (n,):
+                raise ValueError(f"temp_c must be (n,) with n = {n}; got {np.shape(temp_c)}")
+            self._temp_raw = raw_imu.temperature_registers(np.asarray(temp_c, dtype=np.float64))
         self._ins, self._steps, self._tof, self._baro = ins, steps, tof, baro
         self.command_set = command_set
         self.speed = speed
@@ -385,7 +394,7 @@ class ShoeFirmware:
 
         def encode(idx: NDArray[np.int64]) -> NDArray[np.uint8]:
             regs = self._registers[idx][:, cols, :]
-            temp = np.full((idx.size, cols.size), 1000, dtype=np.int16) if layout.temperature else None
+            temp = np.repeat(self._temp_raw[idx][:, None], cols.size, axis=1) if layout.temperature else None
             return raw_imu.encode_payloads(layout, self._ticks_at(self._t[idx]), regs, temp, None)
 
         return encode

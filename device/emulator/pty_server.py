@@ -74,6 +74,7 @@ class PtyShoeServer:
             is in :attr:`fault_log`.
         stall_every_s, stall_s: if set, stop writing for ``stall_s`` of every ``stall_every_s`` of wall
             time (a host or hub that stops reading); the firmware keeps producing meanwhile.
+        temp_c: (n,) sensor temperature, °C, for the raw output's temperature block.
     """
 
     def __init__(
@@ -104,6 +105,7 @@ class PtyShoeServer:
         faults: WireFaults | None = None,
         stall_every_s: float | None = None,
         stall_s: float = 0.0,
+        temp_c: NDArray[np.float64] | None = None,
     ) -> None:
         if split_writes_max is not None and split_writes_max < 1:
             raise ValueError("split_writes_max must be >= 1")
@@ -129,6 +131,7 @@ class PtyShoeServer:
             tick0=tick0,
             first_packet_number=first_packet_number,
             resend_interval_s=resend_interval_s,
+            temp_c=temp_c,
             **extra,
         )
         """The emulated firmware (commands received, resends, ...); touch it only while stopped."""
