@@ -219,6 +219,7 @@ def run_soak(
                 proc.kill()
                 proc.wait()
     result = SoakResult(minutes, wall, np.asarray(times), np.asarray(rss), footnav_code=code)
+    np.savetxt(work / "rss.csv", np.column_stack([times, rss]), delimiter=",", header="wall_s,rss_mb", fmt="%.2f")
     if not finished or not finished[0]:
         raise RuntimeError(f"footnav stopped (code {code}) before the emulator finished; see {work}/footnav.stderr")
     captures = sorted(sessions.glob("*.mcap"))

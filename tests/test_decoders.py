@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -228,7 +229,7 @@ DECODERS = {  # name: (payload length, type byte or None, decoder)
 }
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=int(os.environ.get("FOOTNAV_FUZZ_EXAMPLES", "150")), deadline=None)
 @given(kind=st.sampled_from(sorted(DECODERS)), data=st.data())
 def test_random_payloads_never_crash(kind: str, data: st.DataObject) -> None:
     size, type_byte, decode = DECODERS[kind]
@@ -247,7 +248,7 @@ def test_random_payloads_never_crash(kind: str, data: st.DataObject) -> None:
         decode(bad)
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=int(os.environ.get("FOOTNAV_FUZZ_EXAMPLES", "150")), deadline=None)
 @given(kind=st.sampled_from(sorted(DECODERS)), data=st.data())
 def test_a_packet_with_a_bad_checksum_yields_nothing(kind: str, data: st.DataObject) -> None:
     size, _, _ = DECODERS[kind]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -94,7 +96,7 @@ def _split(data: bytes, cuts: list[int]) -> list[bytes]:
     return [data[a:b] for a, b in zip([0, *points], [*points, len(data)], strict=True)]
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=int(os.environ.get("FOOTNAV_FUZZ_EXAMPLES", "300")), deadline=None)
 @given(
     items=pieces, cuts=st.lists(st.integers(0, 10_000), max_size=20), lengths=st.sampled_from([None, {28}])
 )
@@ -130,7 +132,7 @@ clean_packets = st.lists(
 )
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=int(os.environ.get("FOOTNAV_FUZZ_EXAMPLES", "200")), deadline=None)
 @given(garbage=st.binary(max_size=80), packets=clean_packets)
 def test_resync_within_one_packet(garbage: bytes, packets: list[DataPacket]) -> None:
     framer = Framer(accepted_lengths={28})
@@ -140,7 +142,7 @@ def test_resync_within_one_packet(garbage: bytes, packets: list[DataPacket]) -> 
         assert out == packets  # garbage without header bytes costs nothing
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=int(os.environ.get("FOOTNAV_FUZZ_EXAMPLES", "200")), deadline=None)
 @given(packets=clean_packets, cut=st.integers(0, 10_000))
 def test_truncation_and_concatenation(packets: list[DataPacket], cut: int) -> None:
     data = b"".join(encode(p) for p in packets)
@@ -152,7 +154,7 @@ def test_truncation_and_concatenation(packets: list[DataPacket], cut: int) -> No
     assert first + framer.feed(data[cut:]) == packets  # the rest completes the cut packet
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=int(os.environ.get("FOOTNAV_FUZZ_EXAMPLES", "300")), deadline=None)
 @given(packets=clean_packets, bit=st.integers(0, 10_000))
 def test_single_bit_flip_loses_exactly_one_packet(packets: list[DataPacket], bit: int) -> None:
     data = bytearray(b"".join(encode(p) for p in packets))
