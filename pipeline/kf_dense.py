@@ -56,10 +56,11 @@ def propagate(P: F64, F: F64, q_diag: F64, M: F64) -> None:
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
-def update3(dx: F64, P: F64, H: F64, y: F64, r: F64, work: F64) -> float:
+def update3(dx: F64, P: F64, H: F64, y: F64, r: F64, work: F64, gate: float = np.inf) -> float:
     """One 3-row update (module docstring); adds ``K y`` to ``dx`` (n,), updates ``P`` (n, n).
 
-    ``H`` is (3, n), ``y`` (3,), ``r`` (3,) the noise variances, ``work`` (9, n) scratch. Returns the NIS.
+    ``H`` is (3, n), ``y`` (3,), ``r`` (3,) the noise variances, ``work`` (9, n) scratch. Returns the NIS;
+    when it is ``gate`` or more the update is not applied (a χ² gate).
     """  # pragma: no cover
     n = P.shape[0]
     # rows 0-2 of work: (P Hᵀ)ᵀ = H P (P symmetric)
@@ -89,6 +90,8 @@ def update3(dx: F64, P: F64, H: F64, y: F64, r: F64, work: F64) -> float:
         + y[1] * (i01 * y[0] + i11 * y[1] + i12 * y[2])
         + y[2] * (i02 * y[0] + i12 * y[1] + i22 * y[2])
     )
+    if not nis < gate:
+        return nis
     # rows 3-5: Kᵀ = S⁻¹ H P; rows 6-8: D = (K S)ᵀ − H P, so that the Joseph form is
     # P_ij + Σ_a (D_ai K_ja − K_ia (HP)_aj) (the same expansion as pipeline.eskf._update3)
     for j in range(n):
