@@ -50,7 +50,14 @@ from numpy.typing import NDArray
 
 from pipeline import kf_dense
 from pipeline.alignment import align_from_still
-from pipeline.dual_imu_paper import ACC_FULL_SCALE_MPS2, GYR_FULL_SCALE_RADPS, _sample_ok, still_window
+from pipeline.dual_imu_common import (
+    ACC_FULL_SCALE_MPS2,
+    GYR_FULL_SCALE_RADPS,
+    fault_report,
+    quat_to_mats,
+    sample_ok,
+    still_window,
+)
 from pipeline.navigator import ZARU_GATE_CHI2_3DOF
 from pipeline.profiles import UnitProfile, get_profile
 from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s, quat_to_mat_into
@@ -141,6 +148,7 @@ class DualEskfTrack:
         nis_rate: (n,) NIS of the equal-rate innovation (NaN where none).
         imu_ok: (n, 2) whether each IMU's sample was used.
         counters: named counts (see ``COUNTER_NAMES``).
+        messages: plain-language report of unusable IMU samples (empty when there were none).
     """
 
     pos1_n_m: F64
@@ -154,6 +162,7 @@ class DualEskfTrack:
     nis_rate: F64
     imu_ok: NDArray[np.bool_]
     counters: dict[str, int]
+    messages: tuple[str, ...] = ()
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
@@ -234,8 +243,8 @@ def run_dual_filter(
     wdot = np.zeros(3)
     for k in range(n):
         dt = dt_s[k]
-        ok0 = _sample_ok(acc[k, 0], gyr[k, 0], par[PAR_ACC_FS], par[PAR_GYR_FS])
-        ok1 = _sample_ok(acc[k, 1], gyr[k, 1], par[PAR_ACC_FS], par[PAR_GYR_FS])
+        ok0 = sample_ok(acc[k, 0], gyr[k, 0], par[PAR_ACC_FS], par[PAR_GYR_FS])
+        ok1 = sample_ok(acc[k, 1], gyr[k, 1], par[PAR_ACC_FS], par[PAR_GYR_FS])
         out_ok[k, 0], out_ok[k, 1] = ok0, ok1
         if not ok0:
             counters[CNT_BAD1] += 1
@@ -451,7 +460,7 @@ def run_dual_eskf(
         out_x, out_cov, out_res, out_nis, out_ok, counters,
     )  # fmt: skip
     quat = out_x[:, 6:10]
-    half_cm = 0.5 * np.einsum("nij,j->ni", _mats(quat), m)
+    half_cm = 0.5 * np.einsum("nij,j->ni", quat_to_mats(quat), m)
     centre = out_x[:, 0:3]
     return DualEskfTrack(
         pos1_n_m=centre - half_cm,
@@ -465,17 +474,5 @@ def run_dual_eskf(
         nis_rate=out_nis,
         imu_ok=out_ok,
         counters={name: int(counters[i]) for i, name in enumerate(COUNTER_NAMES)},
-    )
-
-
-def _mats(quat_wxyz: F64) -> F64:
-    """(n, 4) -> (n, 3, 3) body-to-navigation rotation matrices."""
-    w, x, y, z = (quat_wxyz[:, i] for i in range(4))
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-        ],
-        axis=1,
+        messages=tuple(fault_report(out_ok, t_s)),
     )

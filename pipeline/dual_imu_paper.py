@@ -48,6 +48,14 @@ from numpy.typing import NDArray
 
 from pipeline import kf_dense
 from pipeline.alignment import align_from_still
+from pipeline.dual_imu_common import (
+    ACC_FULL_SCALE_MPS2,
+    GYR_FULL_SCALE_RADPS,
+    fault_report,
+    quat_to_mats,
+    sample_ok,
+    still_window,
+)
 from pipeline.profiles import UnitProfile, get_profile
 from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s, quat_to_mat_into
 
@@ -55,11 +63,6 @@ F64 = NDArray[np.float64]
 
 N_STATE = 12
 R1, R2, V1, V2 = 0, 3, 6, 9
-
-ACC_FULL_SCALE_MPS2 = 16.0 * 9.80665 * (32767.0 / 32768.0)
-"""±16 g, the firmware's accelerometer range (protocol-openshoe.md 5.4): readings at it are saturated."""
-GYR_FULL_SCALE_RADPS = math.radians(2000.0) * (32767.0 / 32768.0)
-"""±2000 °/s, the gyroscope range."""
 
 (PAR_SIG_ACC, PAR_REL_POS, PAR_REL_VEL, PAR_ZUPT, PAR_G, PAR_ACC_FS, PAR_GYR_FS) = range(7)
 N_PAR = 7
@@ -100,6 +103,7 @@ class DualTrack:
         nis: (n,) NIS of the constraint residual (NaN where none).
         imu_ok: (n, 2) whether each IMU's sample was used.
         counters: named counts (bad samples per IMU, updates).
+        messages: plain-language report of unusable IMU samples (empty when there were none).
     """
 
     pos1_n_m: F64
@@ -111,16 +115,7 @@ class DualTrack:
     nis: F64
     imu_ok: NDArray[np.bool_]
     counters: dict[str, int]
-
-
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
-def _sample_ok(f: F64, w: F64, acc_fs: float, gyr_fs: float) -> bool:  # pragma: no cover
-    for r in range(3):
-        if not (math.isfinite(f[r]) and math.isfinite(w[r])):
-            return False
-        if abs(f[r]) >= acc_fs or abs(w[r]) >= gyr_fs:
-            return False
-    return True
+    messages: tuple[str, ...] = ()
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
@@ -167,8 +162,8 @@ def run_paper_filter(
     cwm = np.empty(3)
     for k in range(n):
         dt = dt_s[k]
-        ok0 = _sample_ok(acc[k, 0], gyr[k, 0], par[PAR_ACC_FS], par[PAR_GYR_FS])
-        ok1 = _sample_ok(acc[k, 1], gyr[k, 1], par[PAR_ACC_FS], par[PAR_GYR_FS])
+        ok0 = sample_ok(acc[k, 0], gyr[k, 0], par[PAR_ACC_FS], par[PAR_GYR_FS])
+        ok1 = sample_ok(acc[k, 1], gyr[k, 1], par[PAR_ACC_FS], par[PAR_GYR_FS])
         out_ok[k, 0], out_ok[k, 1] = ok0, ok1
         if not ok0:
             counters[CNT_BAD1] += 1
@@ -290,24 +285,6 @@ def paper_parameters(config: PaperConfig, rate_hz: float, gravity_mps2: float) -
     return par
 
 
-def still_window(acc_b_mps2: F64, gyr_b_radps: F64, rate_hz: float, align_s: float) -> slice:
-    """The first ``align_s`` of the record, checked to be still (both IMUs' rates under 0.3 rad/s).
-
-    Raises:
-        ValueError: the record is shorter or the unit moves in it.
-    """
-    need = max(2, round(align_s * rate_hz))
-    if acc_b_mps2.shape[0] < need:
-        raise ValueError(f"need at least {align_s} s of still data at the start for the alignment")
-    window = slice(0, need)
-    rate = np.linalg.norm(gyr_b_radps[window], axis=-1)
-    if not np.all(np.nan_to_num(rate, nan=np.inf) < 0.3):
-        raise ValueError(
-            f"the dual-IMU filters align on the first {align_s} s, which must be still (and finite on both IMUs)"
-        )
-    return window
-
-
 def run_paper(
     t_s: F64,
     acc_b_mps2: F64,
@@ -338,7 +315,7 @@ def run_paper(
     gyr_bias = np.ascontiguousarray(gyr[window].mean(axis=0))
     m = np.asarray(lever_b_m, dtype=np.float64).reshape(3)
     quat = al.quat_nb_wxyz.copy()
-    R = _mat(quat)
+    R = quat_to_mats(quat[None, :])[0]
     x = np.zeros(N_STATE)
     x[R2 : R2 + 3] = R @ m
     P = np.diag(np.concatenate([np.full(6, 1e-8), np.full(6, 1e-4)]))
@@ -355,7 +332,7 @@ def run_paper(
         paper_parameters(cfg, rate_hz, al.gravity_mps2),
         out_x, out_quat, out_res, out_nis, out_ok, counters,
     )  # fmt: skip
-    Rs = _mats(out_quat)
+    Rs = quat_to_mats(out_quat)
     cm = Rs @ m
     r1, r2 = out_x[:, R1 : R1 + 3], out_x[:, R2 : R2 + 3]
     return DualTrack(
@@ -374,23 +351,5 @@ def run_paper(
             "swing_updates": int(counters[CNT_SWING_UPDATES]),
             "stance_updates": int(counters[CNT_STANCE_UPDATES]),
         },
-    )
-
-
-def _mat(quat_wxyz: F64) -> F64:
-    out = np.empty((3, 3))
-    quat_to_mat_into(quat_wxyz[0], quat_wxyz[1], quat_wxyz[2], quat_wxyz[3], out)
-    return out
-
-
-def _mats(quat_wxyz: F64) -> F64:
-    """(n, 4) -> (n, 3, 3) body-to-navigation rotation matrices."""
-    w, x, y, z = (quat_wxyz[:, i] for i in range(4))
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-        ],
-        axis=1,
+        messages=tuple(fault_report(out_ok, t_s)),
     )

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from device.emulator import paths
 from device.emulator.gait import GaitTruth, simulate_walk
 from device.emulator.imu_errors import ImuErrorsApplied, ImuGrade, corrupt
+from pipeline.dual_imu_common import quat_to_mats
 
 F64 = NDArray[np.float64]
 
@@ -43,19 +44,6 @@ DEFAULT_LEVER_B_M: Final = (0.01, 0.01, 0.0)
 """IMU 2's position in IMU 1's body axes, m (the issue's default: 1.4 cm apart on the board)."""
 
 DEFAULT_GRADE: Final = "icm20948"
-
-
-def quat_to_mat(quat_wxyz: F64) -> F64:
-    """(n, 4) scalar-first unit quaternions -> (n, 3, 3) rotation matrices (body to navigation)."""
-    w, x, y, z = (quat_wxyz[:, i] for i in range(4))
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-        ],
-        axis=1,
-    )
 
 
 def angular_acceleration(gyr_b_radps: F64, rate_hz: float) -> F64:
@@ -102,7 +90,7 @@ def rigid_board(truth: GaitTruth, lever_b_m: F64 | tuple[float, float, float] = 
     m = np.asarray(lever_b_m, dtype=np.float64).reshape(3)
     w = truth.gyr_b_radps
     wdot = angular_acceleration(w, truth.rate_hz)
-    R = quat_to_mat(truth.quat_nb_wxyz)
+    R = quat_to_mats(truth.quat_nb_wxyz)
     w_x_m = np.cross(w, m)
     acc2 = truth.acc_b_mps2 + np.cross(wdot, m) + np.cross(w, w_x_m)
     pos2 = truth.pos_n_m + R @ m
