@@ -11,10 +11,11 @@ from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]
 
-ACC_FULL_SCALE_MPS2 = 16.0 * 9.80665 * (32767.0 / 32768.0)
-"""±16 g, the firmware's accelerometer range (protocol-openshoe.md 5.4): readings at it are saturated."""
-GYR_FULL_SCALE_RADPS = math.radians(2000.0) * (32767.0 / 32768.0)
-"""±2000 °/s, the gyroscope range."""
+ACC_FULL_SCALE_MPS2 = 9.80665 / 2048.0 * 32766.5
+"""Half an LSB below the largest reading at ±16 g (2048 LSB/g, int16; protocol-openshoe.md 5.4): a
+reading this large is the register at its limit, i.e. saturated."""
+GYR_FULL_SCALE_RADPS = math.radians(1.0) / 16.4 * 32766.5
+"""Likewise for the gyroscope at ±2000 °/s (16.4 LSB per °/s)."""
 
 
 @njit(cache=True, error_model="numpy")

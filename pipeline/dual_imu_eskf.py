@@ -258,9 +258,16 @@ def run_dual_filter(
         w2 = 0.5 if (ok0 and ok1) else (1.0 if ok1 else 0.0)
         quat_to_mat_into(x[6], x[7], x[8], x[9], R0)
         if any_ok:
-            for c in range(3):
-                w[c] = w1 * (gyr[k, 0, c] - x[13 + c]) + w2 * (gyr[k, 1, c] - x[19 + c])
-                fb[c] = w1 * (acc[k, 0, c] - x[10 + c]) + w2 * (acc[k, 1, c] - x[16 + c])
+            for c in range(3):  # (weights times a NaN sample would still be NaN: branch)
+                if ok0 and ok1:
+                    w[c] = 0.5 * ((gyr[k, 0, c] - x[13 + c]) + (gyr[k, 1, c] - x[19 + c]))
+                    fb[c] = 0.5 * ((acc[k, 0, c] - x[10 + c]) + (acc[k, 1, c] - x[16 + c]))
+                elif ok0:
+                    w[c] = gyr[k, 0, c] - x[13 + c]
+                    fb[c] = acc[k, 0, c] - x[10 + c]
+                else:
+                    w[c] = gyr[k, 1, c] - x[19 + c]
+                    fb[c] = acc[k, 1, c] - x[16 + c]
             if dt > 0.0:
                 for c in range(3):
                     wdot[c] += _WDOT_SMOOTHING * ((w[c] - w_prev[c]) / dt - wdot[c])
@@ -349,7 +356,12 @@ def run_dual_filter(
             for c in range(3):
                 H[c, BG1 + c] = w1
                 H[c, BG2 + c] = w2
-                y[c] = w1 * (gyr[k, 0, c] - x[13 + c]) + w2 * (gyr[k, 1, c] - x[19 + c])
+                if ok0 and ok1:  # the rate of the usable IMU(s), corrected with the biases as now updated
+                    y[c] = 0.5 * ((gyr[k, 0, c] - x[13 + c]) + (gyr[k, 1, c] - x[19 + c]))
+                elif ok0:
+                    y[c] = gyr[k, 0, c] - x[13 + c]
+                else:
+                    y[c] = gyr[k, 1, c] - x[19 + c]
                 r[c] = par[PAR_ZARU] ** 2
             if kf_dense.update3(dx, P, H, y, r, work, par[PAR_ZARU_GATE]) < par[PAR_ZARU_GATE]:
                 _inject(x, P, dx)
