@@ -19,8 +19,10 @@ when both IMUs are usable and ``(1, 0)`` or ``(0, 1)`` when only one is. Measure
 
 - **equal angular rate** (every sample, swing and stance, both IMUs usable):
   ``ω₁ − ω₂ = b_g1 − b_g2 + n``, ``n ~ N(0, 2 σ_ω²)``: the gyro-bias difference, continuously;
-- **equal specific force in stance** (both usable): ``f₁ − f₂ = b_a1 − b_a2 + n`` (the lever-arm
-  terms vanish when the foot is still): the accelerometer-bias difference;
+- **equal specific force in stance** (both usable): ``f₁ − f₂ + ω̇ × m + ω × (ω × m) = b_a1 − b_a2 + n``
+  (the lever-arm terms vanish when the foot is still, but the detector's stance edges already turn;
+  ``ω̇`` from a smoothed backward difference of the rate, its noise in ``n``), χ²-gated: the
+  accelerometer-bias difference;
 - **zero velocity** of the board in stance (``v_c = 0``), with the roll-lever noise of
   :mod:`pipeline.eskf`, and the χ²-gated **zero angular rate** on the averaged rate
   (``H = ½ I`` on each gyro bias).
@@ -86,8 +88,9 @@ P0, V0, TH0, BA1, BG1, BA2, BG2 = 0, 3, 6, 9, 12, 15, 18
     PAR_ACC_WHITE,
     PAR_ACC_FS,
     PAR_GYR_FS,
-) = range(17)
-N_PAR = 17
+    PAR_WDOT_SIGMA,
+) = range(18)
+N_PAR = 18
 
 (
     CNT_BAD1,
@@ -369,18 +372,26 @@ def run_dual_filter(
             else:
                 counters[CNT_ZARU_REJECTED] += 1
             if ok0 and ok1:
-                # equal specific force while still: f₁ − f₂ = b_a1 − b_a2 + n
+                # equal specific force at rest, lever-arm terms put back for the stance edges (the
+                # foot already turns there): f₁ − f₂ + ω̇ × m + ω × (ω × m) = b_a1 − b_a2 + n
                 H[:, :] = 0.0
-                lever2 = 4.0 * (hm0 * hm0 + hm1 * hm1 + hm2 * hm2)
+                m0, m1, m2 = 2.0 * hm0, 2.0 * hm1, 2.0 * hm2
+                wm0 = w[1] * m2 - w[2] * m1
+                wm1 = w[2] * m0 - w[0] * m2
+                wm2 = w[0] * m1 - w[1] * m0
+                am0 = (wdot[1] * m2 - wdot[2] * m1) + (w[1] * wm2 - w[2] * wm1)
+                am1 = (wdot[2] * m0 - wdot[0] * m2) + (w[2] * wm0 - w[0] * wm2)
+                am2 = (wdot[0] * m1 - wdot[1] * m0) + (w[0] * wm1 - w[1] * wm0)
+                r_arm = (m0 * m0 + m1 * m1 + m2 * m2) * par[PAR_WDOT_SIGMA] ** 2
                 for c in range(3):
                     H[c, BA1 + c] = 1.0
                     H[c, BA2 + c] = -1.0
-                    y[c] = (acc[k, 0, c] - acc[k, 1, c]) - (x[10 + c] - x[16 + c])
+                    y[c] = (acc[k, 0, c] - acc[k, 1, c]) + (am0, am1, am2)[c] - (x[10 + c] - x[16 + c])
                     out_res[k, 3 + c] = y[c]
-                    r[c] = 2.0 * par[PAR_ACC_WHITE] ** 2 + lever2 * w2sum * w2sum
-                kf_dense.update3(dx, P, H, y, r, work, np.inf)
-                _inject(x, P, dx)
-                counters[CNT_FORCE_EQ] += 1
+                    r[c] = 2.0 * par[PAR_ACC_WHITE] ** 2 + r_arm
+                if kf_dense.update3(dx, P, H, y, r, work, par[PAR_ZARU_GATE]) < par[PAR_ZARU_GATE]:
+                    _inject(x, P, dx)
+                    counters[CNT_FORCE_EQ] += 1
         for i in range(N_NOMINAL):
             out_x[k, i] = x[i]
         for a in range(3):
@@ -410,6 +421,10 @@ def dual_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float) -
     par[PAR_ACC_WHITE] = acc_white
     par[PAR_ACC_FS] = ACC_FULL_SCALE_MPS2
     par[PAR_GYR_FS] = GYR_FULL_SCALE_RADPS
+    # 1σ of the smoothed backward difference of the averaged rate (white, σ_w² = gyr_white²/2): with
+    # e_k = (1 − α) e_{k−1} + α (u_k − u_{k−1})/Δt, Var e = (α/Δt)² σ_w² · 2/(2 − α)
+    alpha = _WDOT_SMOOTHING
+    par[PAR_WDOT_SIGMA] = alpha * gyr_white * rate_hz / math.sqrt(2.0 - alpha)
     return par
 
 
