@@ -17,8 +17,9 @@ What the two IMUs still tell apart, and what the constraints now measure, are th
 (Solà 2017 §5 and §7, global attitude error, as :mod:`pipeline.eskf`), with weights ``w = (½, ½)``
 when both IMUs are usable and ``(1, 0)`` or ``(0, 1)`` when only one is. Measurements:
 
-- **equal angular rate** (every sample, swing and stance, both IMUs usable):
-  ``ω₁ − ω₂ = b_g1 − b_g2 + n``, ``n ~ N(0, 2 σ_ω²)``: the gyro-bias difference, continuously;
+- **equal angular rate** (swing and stance, both IMUs usable): ``ω₁ − ω₂ = b_g1 − b_g2 + n``,
+  ``n ~ N(0, 2 σ_ω² / N)`` for the mean over ``N`` = :data:`RATE_EQ_SAMPLES` samples: the gyro-bias
+  difference, continuously;
 - **equal specific force in stance** (both usable): ``f₁ − f₂ + ω̇ × m + ω × (ω × m) = b_a1 − b_a2 + n``
   (the lever-arm terms vanish when the foot is still, but the detector's stance edges already turn;
   ``ω̇`` from a smoothed backward difference of the rate, its noise in ``n``), χ²-gated: the
@@ -114,6 +115,8 @@ COUNTER_NAMES = (
     "equal_force_updates",
 )
 
+RATE_EQ_SAMPLES = 10
+"""The equal-rate constraint is applied to the mean rate difference of this many samples."""
 _WDOT_SMOOTHING = 0.2  # exponential smoothing of the backward-difference angular acceleration
 
 
@@ -146,7 +149,7 @@ class DualEskfTrack:
         quat_nb_wxyz: (n, 4) attitude.
         pos_cov_n_m2: (n, 3, 3) position covariance, m².
         bias_b: (n, 4, 3) bias estimates [b_a1, b_g1, b_a2, b_g2] (m/s², rad/s).
-        residual_rate_radps: (n, 3) equal-rate innovation ``(ω₁ − ω₂) − (b_g1 − b_g2)`` (NaN where none).
+        residual_rate_radps: (n, 3) equal-rate innovation ``mean(ω₁ − ω₂) − (b_g1 − b_g2)`` (NaN where none).
         residual_force_mps2: (n, 3) equal-force innovation in stance (NaN where none).
         nis_rate: (n,) NIS of the equal-rate innovation (NaN where none).
         imu_ok: (n, 2) whether each IMU's sample was used.
@@ -230,6 +233,15 @@ def run_dual_filter(
     g = par[PAR_G]
     hm0, hm1, hm2 = 0.5 * lever_b_m[0], 0.5 * lever_b_m[1], 0.5 * lever_b_m[2]
     F = np.eye(N_STATE)
+    for c in range(3):  # every block that can be non-zero (module docstring), for the pattern
+        F[P0 + c, V0 + c] = 1.0
+        for j in range(3):
+            F[V0 + c, TH0 + j] = 1.0
+            F[V0 + c, BA1 + j] = 1.0
+            F[V0 + c, BA2 + j] = 1.0
+            F[TH0 + c, BG1 + j] = 1.0
+            F[TH0 + c, BG2 + j] = 1.0
+    ptr, idx = kf_dense.pattern(F)
     q_diag = np.zeros(N_STATE)
     M = np.empty((N_STATE, N_STATE))
     work = np.empty((9, N_STATE))
@@ -244,6 +256,8 @@ def run_dual_filter(
     f_n = np.empty(3)
     w_prev = np.zeros(3)
     wdot = np.zeros(3)
+    rate_sum = np.zeros(3)
+    rate_count = 0
     for k in range(n):
         dt = dt_s[k]
         ok0 = sample_ok(acc[k, 0], gyr[k, 0], par[PAR_ACC_FS], par[PAR_GYR_FS])
@@ -332,19 +346,29 @@ def run_dual_filter(
                 q_diag[BA2 + c] = par[PAR_BA_RW] ** 2 * dt
                 q_diag[BG1 + c] = par[PAR_BG_RW] ** 2 * dt
                 q_diag[BG2 + c] = par[PAR_BG_RW] ** 2 * dt
-            kf_dense.propagate(P, F, q_diag, M)
+            kf_dense.propagate(P, F, ptr, idx, q_diag, M)
         if ok0 and ok1:
-            # equal angular rate: ω₁ − ω₂ = b_g1 − b_g2 + n
-            H[:, :] = 0.0
+            # equal angular rate: ω₁ − ω₂ = b_g1 − b_g2 + n, as the mean over RATE_EQ_SAMPLES samples
+            # (one update with noise 2σ²/N carries what N updates would: the biases hardly move)
             for c in range(3):
-                H[c, BG1 + c] = 1.0
-                H[c, BG2 + c] = -1.0
-                y[c] = (gyr[k, 0, c] - gyr[k, 1, c]) - (x[13 + c] - x[19 + c])
-                out_res[k, c] = y[c]
-                r[c] = 2.0 * par[PAR_GYR_WHITE] ** 2
-            out_nis[k] = kf_dense.update3(dx, P, H, y, r, work, np.inf)
-            _inject(x, P, dx)
-            counters[CNT_RATE_EQ] += 1
+                rate_sum[c] += gyr[k, 0, c] - gyr[k, 1, c]
+            rate_count += 1
+            if rate_count == RATE_EQ_SAMPLES:
+                H[:, :] = 0.0
+                for c in range(3):
+                    H[c, BG1 + c] = 1.0
+                    H[c, BG2 + c] = -1.0
+                    y[c] = rate_sum[c] / rate_count - (x[13 + c] - x[19 + c])
+                    out_res[k, c] = y[c]
+                    r[c] = 2.0 * par[PAR_GYR_WHITE] ** 2 / rate_count
+                    rate_sum[c] = 0.0
+                rate_count = 0
+                out_nis[k] = kf_dense.update3(dx, P, H, y, r, work, np.inf)
+                _inject(x, P, dx)
+                counters[CNT_RATE_EQ] += 1
+        else:
+            rate_count = 0
+            rate_sum[:] = 0.0
         if stance[k] and any_ok:
             w2sum = w[0] ** 2 + w[1] ** 2 + w[2] ** 2
             H[:, :] = 0.0

@@ -146,6 +146,9 @@ def run_paper_filter(
     g = par[PAR_G]
     m0, m1, m2 = lever_b_m[0], lever_b_m[1], lever_b_m[2]
     F = np.eye(N_STATE)
+    for i in range(6):
+        F[i, 6 + i] = 1.0  # the pattern: r depends on v
+    ptr, idx = kf_dense.pattern(F)
     q_diag = np.zeros(N_STATE)
     M = np.empty((N_STATE, N_STATE))
     work = np.empty((9, N_STATE))
@@ -221,7 +224,7 @@ def run_paper_filter(
             for i in range(6):
                 q_diag[i] = 0.25 * dt**4 * sa2
                 q_diag[6 + i] = dt * dt * sa2
-            kf_dense.propagate(P, F, q_diag, M)
+            kf_dense.propagate(P, F, ptr, idx, q_diag, M)
         # observations at the new time: eq. 19 in stance, eq. 18 in swing
         quat_to_mat_into(quat[0], quat[1], quat[2], quat[3], R1m)
         for c in range(3):

@@ -3,7 +3,7 @@
 The single-IMU filter (:mod:`pipeline.eskf`) hand-unrolls its sparse blocks for speed; the dual-IMU
 filters (12 and 21 states) are small enough that plain dense loops cost a few microseconds a sample.
 
-- :func:`propagate` — ``P ← F P Fᵀ + diag(q)`` for a dense ``F``.
+- :func:`propagate` — ``P ← F P Fᵀ + diag(q)``, over the structural non-zeros of ``F`` (:func:`pattern`).
 - :func:`update3` — one 3-row measurement ``y = H δx + n``, ``n ~ N(0, diag(r))``: gain
   ``K = P Hᵀ S⁻¹``, ``δx = K y`` and the Joseph-form covariance written out for any gain,
   ``(I − KH) P (I − KH)ᵀ + K R Kᵀ = P − K H P − P Hᵀ Kᵀ + K S Kᵀ`` (Bucy & Joseph 1968; it stays
@@ -29,25 +29,41 @@ from pipeline.eskf import _inv3_spd
 F64 = NDArray[np.float64]
 
 
+@njit(cache=True)
+def pattern(F: F64) -> tuple[NDArray[np.int64], NDArray[np.int64]]:  # pragma: no cover - compiled
+    """Row pointers and column indices (CSR) of the entries of ``F`` that are not zero."""
+    n = F.shape[0]
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    idx = np.empty(n * n, dtype=np.int64)
+    k = 0
+    for i in range(n):
+        for j in range(n):
+            if F[i, j] != 0.0:
+                idx[k] = j
+                k += 1
+        ptr[i + 1] = k
+    return ptr, idx[:k]
+
+
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
-def propagate(P: F64, F: F64, q_diag: F64, M: F64) -> None:
-    """``P ← F P Fᵀ + diag(q_diag)`` in place; ``M`` is (n, n) scratch. Skips the zeros of ``F``."""  # pragma: no cover
+def propagate(P: F64, F: F64, ptr: NDArray[np.int64], idx: NDArray[np.int64], q_diag: F64, M: F64) -> None:
+    """``P ← F P Fᵀ + diag(q_diag)`` in place, visiting only ``F``'s structural non-zeros.
+
+    ``ptr``, ``idx``: the pattern of ``F`` (:func:`pattern`, taken once with every block that can be
+    non-zero set); ``M`` is (n, n) scratch. Writes the upper triangle and mirrors it.
+    """  # pragma: no cover
     n = P.shape[0]
     for i in range(n):
         for j in range(n):
-            M[i, j] = 0.0
-        for k in range(n):
-            f = F[i, k]
-            if f != 0.0:
-                for j in range(n):
-                    M[i, j] += f * P[k, j]
+            s = 0.0
+            for t in range(ptr[i], ptr[i + 1]):
+                s += F[i, idx[t]] * P[idx[t], j]
+            M[i, j] = s
     for i in range(n):
         for j in range(i, n):
             s = 0.0
-            for k in range(n):
-                f = F[j, k]
-                if f != 0.0:
-                    s += M[i, k] * f
+            for t in range(ptr[j], ptr[j + 1]):
+                s += M[i, idx[t]] * F[j, idx[t]]
             P[i, j] = s
     for i in range(n):
         P[i, i] += q_diag[i]
