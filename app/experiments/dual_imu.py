@@ -143,11 +143,18 @@ class TableRow:
     ratio_to_classic: float
 
 
-def error_table(seeds: list[int], courses: tuple[str, ...] = COURSES) -> list[TableRow]:
-    """Run every course and seed; average the per-run max and mean errors over the seeds."""
+def error_table(
+    seeds: list[int], courses: tuple[str, ...] = COURSES, *, first_runs: dict[str, RunResult] | None = None
+) -> list[TableRow]:
+    """Run every course and seed; average the per-run max and mean errors over the seeds.
+
+    ``first_runs``, if given, receives each course's run of the first seed (for the recording).
+    """
     rows: list[TableRow] = []
     for course in courses:
         runs = [evaluate_run(course, s) for s in seeds]
+        if first_runs is not None:
+            first_runs[course] = runs[0]
         mx = {m: float(np.mean([r.max_error_m[m] for r in runs])) for m in METHODS}
         mean = {m: float(np.mean([r.mean_error_m[m] for r in runs])) for m in METHODS}
         rows.extend(
@@ -189,10 +196,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Print the table (and write the recording with ``--save``)."""
     seeds = list(range(args.first_seed, args.first_seed + max(1, args.seeds)))
-    rows = error_table(seeds)
+    runs: dict[str, RunResult] = {}
+    rows = error_table(seeds, first_runs=runs)
     print(format_table(rows, seeds))
     if args.save is not None:
-        runs = {course: evaluate_run(course, seeds[0]) for course in COURSES}
         save_dual_runs(args.save, {c: view_of(r) for c, r in runs.items()})
         print(f"recording of seed {seeds[0]} written to {args.save} (open it with: rerun {args.save})")
     return 0
