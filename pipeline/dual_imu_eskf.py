@@ -115,6 +115,7 @@ COUNTER_NAMES = (
     "equal_force_updates",
 )
 
+N_AUX = 10
 RATE_EQ_SAMPLES = 10
 """The equal-rate constraint is applied to the mean rate difference of this many samples."""
 _WDOT_SMOOTHING = 0.2  # exponential smoothing of the backward-difference angular acceleration
@@ -210,6 +211,7 @@ def _inject(x: F64, P: F64, dx: F64) -> None:
 def run_dual_filter(
     x: F64,
     P: F64,
+    aux: F64,
     acc: F64,
     gyr: F64,
     dt_s: F64,
@@ -224,6 +226,9 @@ def run_dual_filter(
     counters: NDArray[np.int64],
 ) -> None:
     """The filter loop over n samples; ``x`` (22,) and ``P`` (21, 21) are updated in place.
+
+    ``aux`` (N_AUX,) carries the rest of the state between batches (previous rate, smoothed ω̇, the
+    running equal-rate sum and count), so a stream cut into batches gives the same result as one call.
 
     ``acc``, ``gyr``: (n, 2, 3); ``out_x`` (n, 22) nominal states; ``out_cov`` (n, 3, 3) position
     covariance; ``out_res`` (n, 6) = [equal-rate, equal-force innovations] (NaN where not formed);
@@ -254,10 +259,10 @@ def run_dual_filter(
     fb = np.empty(3)
     w = np.empty(3)
     f_n = np.empty(3)
-    w_prev = np.zeros(3)
-    wdot = np.zeros(3)
-    rate_sum = np.zeros(3)
-    rate_count = 0
+    w_prev = aux[0:3]  # views: updated in place
+    wdot = aux[3:6]
+    rate_sum = aux[6:9]
+    rate_count = int(aux[9])
     for k in range(n):
         dt = dt_s[k]
         ok0 = sample_ok(acc[k, 0], gyr[k, 0], par[PAR_ACC_FS], par[PAR_GYR_FS])
@@ -416,6 +421,7 @@ def run_dual_filter(
                 if kf_dense.update3(dx, P, H, y, r, work, par[PAR_ZARU_GATE]) < par[PAR_ZARU_GATE]:
                     _inject(x, P, dx)
                     counters[CNT_FORCE_EQ] += 1
+        aux[9] = rate_count
         for i in range(N_NOMINAL):
             out_x[k, i] = x[i]
         for a in range(3):
@@ -475,55 +481,94 @@ def run_dual_eskf(
         IMU 2's position in IMU 1's axes, m.
     """
     cfg = config or DualEskfConfig()
-    prof = cfg.profile
     acc = np.ascontiguousarray(acc_b_mps2, dtype=np.float64)
     gyr = np.ascontiguousarray(gyr_b_radps, dtype=np.float64)
     window = still_window(acc, gyr, rate_hz, cfg.align_s)
-    al = align_from_still(acc[window].mean(axis=1), gyr[window].mean(axis=1))
-    m = np.asarray(lever_b_m, dtype=np.float64).reshape(3)
-    x = np.zeros(N_NOMINAL)
-    x[6:10] = al.quat_nb_wxyz
-    R = np.empty((3, 3))
-    quat_to_mat_into(x[6], x[7], x[8], x[9], R)
-    x[0:3] = 0.5 * (R @ m)  # the midpoint; IMU 1 starts at the origin
-    sig = np.concatenate(
-        [
-            np.full(3, cfg.init_pos_sigma_m),
-            np.full(3, cfg.init_vel_sigma_mps),
-            [cfg.init_tilt_sigma_rad, cfg.init_tilt_sigma_rad, cfg.init_yaw_sigma_rad],
-            np.full(3, prof.acc_bias_init_mps2),
-            np.full(3, prof.gyr_bias_init_radps),
-            np.full(3, prof.acc_bias_init_mps2),
-            np.full(3, prof.gyr_bias_init_radps),
-        ]
-    )
-    P = np.diag(sig**2)
-    n = t_s.shape[0]
+    stream = DualEskfStream(cfg, lever_b_m, rate_hz, acc[window], gyr[window])
     dt = np.diff(t_s, prepend=t_s[0] - 1.0 / rate_hz)
-    out_x = np.empty((n, N_NOMINAL))
-    out_cov = np.empty((n, 3, 3))
-    out_res = np.empty((n, 6))
-    out_nis = np.empty(n)
-    out_ok = np.empty((n, 2), dtype=np.bool_)
-    counters = np.zeros(N_CNT, dtype=np.int64)
-    run_dual_filter(
-        x, P, acc, gyr, dt, np.ascontiguousarray(stance), m, dual_parameters(prof, rate_hz, al.gravity_mps2),
-        out_x, out_cov, out_res, out_nis, out_ok, counters,
-    )  # fmt: skip
-    quat = out_x[:, 6:10]
-    half_cm = 0.5 * np.einsum("nij,j->ni", quat_to_mats(quat), m)
-    centre = out_x[:, 0:3]
-    return DualEskfTrack(
-        pos1_n_m=centre - half_cm,
-        pos_imu_n_m=np.stack([centre - half_cm, centre + half_cm], axis=1),
-        vel_n_mps=out_x[:, 3:6].copy(),
-        quat_nb_wxyz=quat.copy(),
-        pos_cov_n_m2=out_cov,
-        bias_b=out_x[:, 10:22].reshape(n, 4, 3).copy(),
-        residual_rate_radps=out_res[:, :3],
-        residual_force_mps2=out_res[:, 3:],
-        nis_rate=out_nis,
-        imu_ok=out_ok,
-        counters={name: int(counters[i]) for i, name in enumerate(COUNTER_NAMES)},
-        messages=tuple(fault_report(out_ok, t_s)),
-    )
+    return stream.step(t_s, acc, gyr, stance, dt)
+
+
+class DualEskfStream:
+    """The filter's state between batches: :meth:`step` runs it over the next samples.
+
+    Args:
+        config: filter settings.
+        lever_b_m: (3,) IMU 2's position in IMU 1's axes, m.
+        rate_hz: nominal sample rate, Hz.
+        acc_still_b_mps2, gyr_still_b_radps: (w, 2, 3) still samples to align on (the first of the stream).
+    """
+
+    def __init__(
+        self, config: DualEskfConfig, lever_b_m: F64, rate_hz: float, acc_still_b_mps2: F64, gyr_still_b_radps: F64
+    ) -> None:
+        cfg, prof = config, config.profile
+        al = align_from_still(acc_still_b_mps2.mean(axis=1), gyr_still_b_radps.mean(axis=1))
+        self.lever_b_m = np.asarray(lever_b_m, dtype=np.float64).reshape(3)
+        x = np.zeros(N_NOMINAL)
+        x[6:10] = al.quat_nb_wxyz
+        R = np.empty((3, 3))
+        quat_to_mat_into(x[6], x[7], x[8], x[9], R)
+        x[0:3] = 0.5 * (R @ self.lever_b_m)  # the midpoint; IMU 1 starts at the origin
+        sig = np.concatenate(
+            [
+                np.full(3, cfg.init_pos_sigma_m),
+                np.full(3, cfg.init_vel_sigma_mps),
+                [cfg.init_tilt_sigma_rad, cfg.init_tilt_sigma_rad, cfg.init_yaw_sigma_rad],
+                np.full(3, prof.acc_bias_init_mps2),
+                np.full(3, prof.gyr_bias_init_radps),
+                np.full(3, prof.acc_bias_init_mps2),
+                np.full(3, prof.gyr_bias_init_radps),
+            ]
+        )
+        self.x = x
+        self.P = np.diag(sig**2)
+        self.aux = np.zeros(N_AUX)
+        self.par = dual_parameters(prof, rate_hz, al.gravity_mps2)
+        self.counters = np.zeros(N_CNT, dtype=np.int64)
+        self._imu_ok: list[NDArray[np.bool_]] = []
+        self._t: list[F64] = []
+
+    def step(self, t_s: F64, acc_b_mps2: F64, gyr_b_radps: F64, stance: NDArray[np.bool_], dt_s: F64) -> DualEskfTrack:
+        """Run over (n,) samples: ``acc``/``gyr`` (n, 2, 3), ``stance`` (n,), ``dt_s`` (n,) the interval
+        before each sample, s. Counters and messages cover everything since the start."""
+        n = t_s.shape[0]
+        m = self.lever_b_m
+        out_x = np.empty((n, N_NOMINAL))
+        out_cov = np.empty((n, 3, 3))
+        out_res = np.empty((n, 6))
+        out_nis = np.empty(n)
+        out_ok = np.empty((n, 2), dtype=np.bool_)
+        run_dual_filter(
+            self.x, self.P, self.aux,
+            np.ascontiguousarray(acc_b_mps2, dtype=np.float64), np.ascontiguousarray(gyr_b_radps, dtype=np.float64),
+            np.ascontiguousarray(dt_s, dtype=np.float64), np.ascontiguousarray(stance), m, self.par,
+            out_x, out_cov, out_res, out_nis, out_ok, self.counters,
+        )  # fmt: skip
+        if not out_ok.all():
+            self._imu_ok.append(out_ok)
+            self._t.append(np.asarray(t_s, dtype=np.float64))
+        quat = out_x[:, 6:10]
+        half_cm = 0.5 * np.einsum("nij,j->ni", quat_to_mats(quat), m)
+        centre = out_x[:, 0:3]
+        return DualEskfTrack(
+            pos1_n_m=centre - half_cm,
+            pos_imu_n_m=np.stack([centre - half_cm, centre + half_cm], axis=1),
+            vel_n_mps=out_x[:, 3:6].copy(),
+            quat_nb_wxyz=quat.copy(),
+            pos_cov_n_m2=out_cov,
+            bias_b=out_x[:, 10:22].reshape(n, 4, 3).copy(),
+            residual_rate_radps=out_res[:, :3],
+            residual_force_mps2=out_res[:, 3:],
+            nis_rate=out_nis,
+            imu_ok=out_ok,
+            counters={name: int(self.counters[i]) for i, name in enumerate(COUNTER_NAMES)},
+            messages=self.messages(),
+        )
+
+    def messages(self) -> tuple[str, ...]:
+        """Plain-language report of the unusable samples so far (batches where both IMUs were fine
+        are not kept)."""
+        if not self._imu_ok:
+            return ()
+        return tuple(fault_report(np.concatenate(self._imu_ok), np.concatenate(self._t)))
