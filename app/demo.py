@@ -47,10 +47,12 @@ from device.unit import RawImuMode
 from pipeline.dual_imu_eskf import DualEskfConfig
 from pipeline.dual_imu_lever import check_lever_arm
 from pipeline.dual_navigator import DualNavConfig, DualNavigator
+from pipeline.nav_types import NavBatch
 from pipeline.navigator import Navigator
 from pipeline.profiles import get_profile
 from pipeline.runner import NavSink
-from views.outputs import open_session_views
+from views.dual_imu import DualRunView
+from views.outputs import SessionViews, open_session_views
 
 PATHS = ("rectangle", "line", "figure8", "stairs")
 DEMO_PUT_TIMEOUT_S = 60.0
@@ -174,7 +176,13 @@ def run_demo(opts: DemoOptions) -> int:
         cfg.set("unit.profile", PROFILE_OF_GRADE[opts.grade], f"demo (grade {opts.grade})")
     session_id = new_session_id("demo")
     views, notes = open_session_views(
-        save=opts.save, want_viewer=opts.viewer, web=opts.web, feet=feet, recording_id=session_id, notice=notice
+        save=opts.save,
+        want_viewer=opts.viewer,
+        web=opts.web,
+        feet=feet,
+        recording_id=session_id,
+        notice=notice,
+        dual_runs=feet if opts.dual_imu else (),
     )
     for note in notes:
         print(note, file=sys.stderr)
@@ -226,6 +234,8 @@ def run_demo(opts: DemoOptions) -> int:
         foot_sinks(run, views, status, two_feet=two, put_timeout_s=put_timeout_s)
         if opts.collect is not None:
             run.sinks.append(opts.collect(run.foot))
+        if views is not None and isinstance(run.navigator, DualNavigator):
+            run.sinks.append(dual_view_sink(run.navigator, views, run.foot))
         if capture is not None:
             run.tap = capture.add_unit(unit_header(run.foot, run.port, "pty (emulator)", cfg, 0))
     server_of = dict(zip(feet, servers, strict=True))
@@ -276,6 +286,31 @@ def run_demo(opts: DemoOptions) -> int:
             for line in dual_summary_lines(run.navigator, truths[0][1], truths[0][2], lever):
                 print(prefix + line)
     return code
+
+
+def dual_view_sink(navigator: DualNavigator, views: SessionViews, run: str) -> NavSink:
+    """A sink that shows the dual-IMU board's own outputs for each batch: both IMUs' tracks (rigidly
+    ``C m`` apart) and the constraint residuals (equal rate, equal specific force in stance)."""
+
+    def show(nav: NavBatch) -> None:
+        track = navigator.last_track
+        if track is None or track.pos1_n_m.shape[0] != len(nav):
+            return
+        views.log_dual(
+            DualRunView(
+                t_s=nav.t_s,
+                truth_n_m=None,
+                tracks_n_m={},
+                imu_tracks_n_m={"imu1": track.pos_imu_n_m[:, 0], "imu2": track.pos_imu_n_m[:, 1]},
+                residuals={
+                    "rate_diff_dps": np.degrees(track.residual_rate_radps),
+                    "force_diff_mps2": track.residual_force_mps2,
+                },
+            ),
+            run=run,
+        )
+
+    return show
 
 
 def dual_summary_lines(

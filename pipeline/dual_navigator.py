@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from pipeline.detectors import DetectorParams, StreamingDetector
 from pipeline.dual_imu_common import ACC_FULL_SCALE_MPS2, GYR_FULL_SCALE_RADPS
-from pipeline.dual_imu_eskf import DualEskfConfig, DualEskfStream
+from pipeline.dual_imu_eskf import DualEskfConfig, DualEskfStream, DualEskfTrack
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavStats
 
@@ -86,6 +86,9 @@ class DualNavigator:
         self.detector = StreamingDetector(config.detector, rate_hz)
         self.stats = NavStats()
         self.filter: DualEskfStream | None = None
+        self.last_track: DualEskfTrack | None = None
+        """The filter's full output for the samples of the last NavBatch returned (each IMU's track,
+        biases, constraint residuals), for sinks that show more than the NavBatch holds."""
         self._pending: list[tuple[NDArray[Any], ...]] = []  # (t, acc, gyr, host, stat, threshold, still)
         self._t_last = math.nan
 
@@ -162,6 +165,7 @@ class DualNavigator:
         dt = np.diff(t, prepend=self._t_last)
         self._t_last = float(t[-1])
         track = self.filter.step(t, acc, gyr, still, dt)
+        self.last_track = track
         c = track.counters
         s = self.stats
         s.samples_out += t.shape[0]

@@ -19,7 +19,7 @@ from device.raw_imu import RawImuBatch
 from pipeline.detectors import DetectorParams, StreamingDetector
 from pipeline.dual_imu_eskf import run_dual_eskf
 from pipeline.dual_navigator import DualNavConfig, DualNavigator
-from views.paths import TIMELINE, FootPaths
+from views.paths import TIMELINE, DualPaths, FootPaths
 
 
 def test_streaming_dual_navigator_equals_the_whole_record_filter_however_batched() -> None:
@@ -73,5 +73,13 @@ def test_demo_dual_imu_end_to_end_reports_a_board_mounted_differently(tmp_path: 
     assert "both IMUs usable at every sample" in text
     assert "disagrees with the data" in text and "mounted differently" in text
     store = RrdReader(out).stream().collect()
-    tbl = store.reader(index=TIMELINE, contents=[f"/{FootPaths().track}"]).to_arrow_table()
-    assert tbl.num_rows == 20_000
+
+    def rows(entity: str) -> int:
+        return int(store.reader(index=TIMELINE, contents=[f"/{entity}"]).to_arrow_table().num_rows)
+
+    assert rows(FootPaths().track) == 20_000
+    # the board's own views, live: both IMUs' tracks and the constraint residuals over time
+    dual = DualPaths("foot")
+    assert rows(dual.imu("imu1")) == rows(dual.imu("imu2")) >= 2_000
+    assert rows(dual.residual("rate_diff_dps", "x")) >= 1_500  # one per 10 samples, both IMUs usable
+    assert rows(dual.residual("force_diff_mps2", "z")) >= 2_000  # stance samples

@@ -42,14 +42,14 @@ class DualRunView:
 
     Attributes:
         t_s: (n,) sample times, s.
-        truth_n_m: (n, 3) IMU 1's true position, m.
+        truth_n_m: (n, 3) IMU 1's true position, m, or None (a live session logs truth its own way).
         tracks_n_m: method -> (n, 3) IMU 1's position as the method estimates it (NaN rows skipped).
         imu_tracks_n_m: IMU name -> (n, 3) that IMU's own track.
         residuals: residual name (with its unit) -> (n, 3) values, NaN where not formed.
     """
 
     t_s: F64
-    truth_n_m: F64
+    truth_n_m: F64 | None
     tracks_n_m: Mapping[str, F64]
     imu_tracks_n_m: Mapping[str, F64]
     residuals: Mapping[str, F64]
@@ -71,7 +71,7 @@ def dual_columns(
 ) -> list[tuple[str, rr.TimeColumn, rr.ComponentColumnList]]:
     """``(entity, index, columns)`` triples for ``send_columns``."""
     out = []
-    items = [(paths.truth, view.truth_n_m, "truth")]
+    items = [] if view.truth_n_m is None else [(paths.truth, view.truth_n_m, "truth")]
     items += [(paths.track(m), p, m) for m, p in view.tracks_n_m.items()]
     items += [(paths.imu(i), p, i) for i, p in view.imu_tracks_n_m.items()]
     for entity, pos, name in items:
@@ -90,9 +90,9 @@ def dual_columns(
 
 def static_styles(view: DualRunView, paths: DualPaths) -> list[tuple[str, rr.AsComponents]]:
     """Colours and radii of the tracks, logged once."""
-    out: list[tuple[str, rr.AsComponents]] = [
-        (paths.truth, rr.Points3D.from_fields(colors=[METHOD_COLORS["truth"]], radii=[TRACK_RADIUS_M]))
-    ]
+    out: list[tuple[str, rr.AsComponents]] = []
+    if view.truth_n_m is not None:
+        out.append((paths.truth, rr.Points3D.from_fields(colors=[METHOD_COLORS["truth"]], radii=[TRACK_RADIUS_M])))
     for m in view.tracks_n_m:
         out.append(
             (
