@@ -55,9 +55,8 @@ class DualRunView:
     residuals: Mapping[str, F64]
 
 
-def _points(
-    entity: str, t_s: F64, pos: F64, color: tuple[int, int, int], every: int
-) -> tuple[str, rr.TimeColumn, rr.ComponentColumnList] | None:
+def _points(entity: str, t_s: F64, pos: F64, every: int) -> tuple[str, rr.TimeColumn, rr.ComponentColumnList] | None:
+    """Every ``every``-th finite row of ``pos`` as a Points3D column (colours: :func:`static_styles`)."""
     keep = np.zeros(t_s.shape[0], dtype=bool)
     keep[::every] = True
     keep &= np.all(np.isfinite(pos), axis=1)
@@ -71,11 +70,11 @@ def dual_columns(
 ) -> list[tuple[str, rr.TimeColumn, rr.ComponentColumnList]]:
     """``(entity, index, columns)`` triples for ``send_columns``."""
     out = []
-    items = [] if view.truth_n_m is None else [(paths.truth, view.truth_n_m, "truth")]
-    items += [(paths.track(m), p, m) for m, p in view.tracks_n_m.items()]
-    items += [(paths.imu(i), p, i) for i, p in view.imu_tracks_n_m.items()]
-    for entity, pos, name in items:
-        col = _points(entity, view.t_s, pos, METHOD_COLORS.get(name, (200, 200, 200)), track_every)
+    items = [] if view.truth_n_m is None else [(paths.truth, view.truth_n_m)]
+    items += [(paths.track(m), p) for m, p in view.tracks_n_m.items()]
+    items += [(paths.imu(i), p) for i, p in view.imu_tracks_n_m.items()]
+    for entity, pos in items:
+        col = _points(entity, view.t_s, pos, track_every)
         if col is not None:
             out.append(col)
     for name, values in view.residuals.items():
