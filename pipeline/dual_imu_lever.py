@@ -11,7 +11,9 @@ terms are tenths of m/s² for a 1.4 cm arm, well above the noise of the differen
 - ``ω`` = the averaged rate, ``ω̇`` its central difference over ±``half_window`` samples (a monitor,
   so a few ms of look-ahead are fine);
 - ``Δb`` = the mean of ``f₂ − f₁`` over the stance samples so far (the arm terms vanish at rest);
-- residual ``e = f₂ − f₁ − Δb − A m`` and its NIS ``eᵀ e / σ²`` with ``σ² = 2 σ_f²`` per axis.
+- residual ``e = f₂ − f₁ − Δb − A m`` and its NIS ``eᵀ e / σ²`` with ``σ² = 2 σ_f²`` per axis;
+- samples where either IMU is not finite or at full scale, and their neighbours within the
+  difference stencil, are left out.
 
 The NIS summed over windows of ``window_s`` of swing is χ² with 3 × (samples) degrees of freedom
 when the lever arm is right (Bar-Shalom et al. 2001 §5.4); windows above the ``1 − alpha`` quantile
@@ -41,6 +43,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
+
+from pipeline.dual_imu_common import ACC_FULL_SCALE_MPS2, GYR_FULL_SCALE_RADPS
 
 F64 = NDArray[np.float64]
 
@@ -137,7 +141,11 @@ def check_lever_arm(
     m = np.asarray(lever_b_m, dtype=np.float64).reshape(3)
     n = acc.shape[0]
     h = half_window
-    ok = np.all(np.isfinite(acc), axis=(1, 2)) & np.all(np.isfinite(gyr), axis=(1, 2))
+    # usable: finite and below full scale on both IMUs (a saturated reading is not the motion)
+    with np.errstate(invalid="ignore"):
+        ok = np.all(np.abs(acc) < ACC_FULL_SCALE_MPS2, axis=(1, 2)) & np.all(
+            np.abs(gyr) < GYR_FULL_SCALE_RADPS, axis=(1, 2)
+        )
     w = np.where(ok[:, None], gyr.mean(axis=1), np.nan)
     wdot = np.full((n, 3), np.nan)
     wdot[h : n - h] = (w[2 * h :] - w[: n - 2 * h]) * (rate_hz / (2 * h))

@@ -165,3 +165,14 @@ def test_a_lever_arm_that_disagrees_with_the_data_is_detected_and_reported() -> 
     turned = checks["turned"]
     assert np.median(turned.window_nis / turned.window_bound) > 5
     assert np.median(checks["right"].window_nis / checks["right"].window_bound) < 1
+
+
+def test_lever_arm_check_leaves_out_dropped_and_saturated_samples() -> None:
+    acc, gyr, _, _ = _faulty(1)
+    _, _, stance = StreamingDetector(DetectorParams(), 1000.0).update(
+        np.nan_to_num(acc[:, 0]), np.nan_to_num(gyr[:, 0])
+    )
+    sigma = get_profile("generic").acc_noise_mps2_rthz * math.sqrt(1000.0)
+    check = check_lever_arm(acc, gyr, stance, LEVER, 1000.0, sigma_acc_mps2=sigma)
+    assert check.consistent and "agrees" in check.message
+    np.testing.assert_allclose(check.estimated_b_m, LEVER, atol=5e-4)
