@@ -32,7 +32,10 @@ With one IMU unusable (not finite, or at full scale: saturated) the filter navig
 its own bias estimates and the lever-arm terms it can form: ``f_c = f₁ + ω̇ × m/2 + ω × (ω × m/2)``
 (``ω̇`` from a smoothed backward difference of the rate), and counts every such sample.
 
-Output is IMU 1's point, ``p₁ = p_c − ½ C m``, and IMU 2's, ``p_c + ½ C m``.
+Output is IMU 1's point, ``p₁ = p_c − ½ C m``, and IMU 2's, ``p_c + ½ C m``. :class:`DualEskfStream`
+carries the filter from batch to batch (bit for bit the same as one call, tested);
+:func:`run_dual_eskf` runs a whole record; :mod:`pipeline.dual_navigator` adds detection and
+alignment for a live stream.
 
 References
 ----------
