@@ -43,7 +43,7 @@ def test_streaming_dual_navigator_equals_the_whole_record_filter_however_batched
     pos = np.concatenate([o.pos_n_m for o in outs])
     assert pos.shape == (n, 3) and nav.stats.samples_out == n and nav.stats.aligned_at_s == 0.0
     np.testing.assert_array_equal(np.concatenate([o.stance for o in outs]), stance)
-    np.testing.assert_allclose(pos, whole.pos1_n_m, atol=1e-9)
+    np.testing.assert_array_equal(pos, whole.pos1_n_m)  # bit for bit
     assert nav.messages == whole.messages and "IMU 2 unusable" in nav.messages[0]
 
 
