@@ -96,7 +96,7 @@ def build_blueprint(
         feet: foot names (see :class:`views.paths.FootPaths`); the camera frames the whole scene.
         plot_window_s: width of the scrolling clearance/stance window, s.
         dual_runs: dual-IMU boards in the session (:class:`views.paths.DualPaths`): their IMU tracks
-            are drawn as trails and their constraint residuals get a plot tab.
+            are drawn as trails and their constraint residuals get a plot of their own.
     """
     paths = [FootPaths(f) for f in feet]
     overrides: dict[str, list[rrb.VisibleTimeRanges | rr.Points3D]] = {}
