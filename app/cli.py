@@ -58,6 +58,10 @@ def _add_output_args(p: argparse.ArgumentParser, *, capture: bool) -> None:
         p.add_argument("--no-capture", action="store_true", help="do not write a capture file")
 
 
+def _lever(values: list[float] | None) -> tuple[float, float, float] | None:
+    return None if values is None else (values[0], values[1], values[2])
+
+
 def build_parser() -> argparse.ArgumentParser:
     from app.demo import PATHS
     from device.emulator.imu_errors import IMU_GRADES
@@ -79,7 +83,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--speed", type=_positive, default=1.4, metavar="M/S", help="walking speed, 1.2-1.8 m/s (default 1.4)"
     )
     demo.add_argument(
-        "--grade", choices=sorted(IMU_GRADES), default="mpu6500x4", help="emulated sensor grade"
+        "--grade",
+        choices=sorted(IMU_GRADES),
+        default=None,
+        help="emulated sensor grade (default mpu6500x4; icm20948 with --dual-imu)",
     )
     _add_output_args(demo, capture=True)
     _add_config_args(demo)
@@ -94,6 +101,29 @@ def build_parser() -> argparse.ArgumentParser:
         "--miscalibrated",
         action="store_true",
         help="the emulated miscalibrated unit of `calibrate --demo` (its calibration applies if made)",
+    )
+    demo.add_argument(
+        "--dual-imu",
+        action="store_true",
+        help="a dual-IMU board (two IMUs on one PCB, raw output 0x28, IMU mask 0b11) navigated by footnav's "
+        "dual-IMU filter",
+    )
+    demo.add_argument(
+        "--lever-arm",
+        type=float,
+        nargs=3,
+        default=None,
+        metavar=("X", "Y", "Z"),
+        help="with --dual-imu: IMU 2's position in IMU 1's axes, m (default 0.01 0.01 0)",
+    )
+    demo.add_argument(
+        "--board-lever-arm",
+        type=float,
+        nargs=3,
+        default=None,
+        metavar=("X", "Y", "Z"),
+        help="with --dual-imu: where the emulated board really has IMU 2, m (default: --lever-arm); "
+        "a different value shows the lever-arm check",
     )
 
     live = sub.add_parser(
@@ -386,7 +416,7 @@ def main(argv: list[str] | None = None) -> int:
                     path=args.path,
                     duration_s=args.duration,
                     speed_mps=args.speed,
-                    grade=args.grade,
+                    grade=args.grade or ("icm20948" if args.dual_imu else "mpu6500x4"),
                     save=args.save,
                     viewer=not args.no_viewer,
                     realtime=args.pace,
@@ -396,6 +426,9 @@ def main(argv: list[str] | None = None) -> int:
                     capture=bool(cfg["session.capture"]),
                     config=cfg,
                     miscalibrated=args.miscalibrated,
+                    dual_imu=args.dual_imu,
+                    lever_b_m=_lever(args.lever_arm),
+                    board_lever_b_m=_lever(args.board_lever_arm),
                 )
             )
         if args.command == "live":

@@ -6,6 +6,10 @@ the distance walked and the final position error against the emulator's ground t
 ``--miscalibrated``: the shoe is the emulated miscalibrated unit of ``footnav calibrate --demo`` (same
 MCU id, scale factors, misalignment, biases and temperature terms, warming up during the walk); its
 calibration file, if ``calibrate --demo`` made one, is applied as for any unit that connects.
+With ``dual_imu`` the shoe carries a dual-IMU board: two IMUs a lever arm apart on one PCB
+(:mod:`device.emulator.dual_imu`), streamed as raw multi-IMU output 0x28 with IMU mask 0b11 and
+navigated by footnav's dual-IMU filter (:mod:`pipeline.dual_navigator`); the summary adds what went
+wrong with either IMU and whether the configured lever arm agrees with the data.
 """
 
 from __future__ import annotations
@@ -38,13 +42,22 @@ from app.live import (
 )
 from app.session import SerialSessionResult, run_serial_session
 from app.status import StatusLine
+from device.emulator.dual_imu import DEFAULT_LEVER_B_M, rigid_board
 from device.emulator.gait import GaitTruth, simulate_walk
 from device.emulator.icosahedron import MISCALIBRATED_MCU_ID, miscalibrated_signals, warm_up_c
 from device.emulator.imu_errors import IMU_GRADES, corrupt
 from device.emulator.pty_server import PtyShoeServer
+from device.raw_imu import DUAL_IMU_MASK
+from device.unit import RawImuMode
+from pipeline.dual_imu_eskf import DualEskfConfig
+from pipeline.dual_imu_lever import check_lever_arm
+from pipeline.dual_navigator import DualNavConfig, DualNavigator
+from pipeline.nav_types import NavBatch
 from pipeline.navigator import Navigator
+from pipeline.profiles import get_profile
 from pipeline.runner import NavSink
-from views.outputs import open_session_views
+from views.dual_imu import DualRunView
+from views.outputs import SessionViews, open_session_views
 
 PATHS = ("rectangle", "line", "figure8", "stairs")
 DEMO_PUT_TIMEOUT_S = 60.0
@@ -81,6 +94,13 @@ class DemoOptions:
     """Tests: an extra NavSink per foot (given the foot name)."""
     miscalibrated: bool = False
     """The shoe is the emulated miscalibrated unit (see the module docstring)."""
+    dual_imu: bool = False
+    """A dual-IMU board instead of the single (calibrated-output) IMU; one foot only."""
+    lever_b_m: tuple[float, float, float] | None = None
+    """The lever arm the filter is told (IMU 2 in IMU 1's axes, m); None: the default board's."""
+    board_lever_b_m: tuple[float, float, float] | None = None
+    """Where the emulated board really has IMU 2, m; None: ``lever_b_m`` (a different one is a
+    board mounted differently: the lever-arm check reports it)."""
 
 
 @dataclass(frozen=True)
@@ -133,17 +153,34 @@ def demo_truth(opts: DemoOptions, foot_index: int) -> tuple[GaitTruth, NDArray[n
     return truth, acc, gyr
 
 
+def dual_demo_truth(opts: DemoOptions) -> tuple[GaitTruth, NDArray[np.float64], NDArray[np.float64]]:
+    """Ground truth of IMU 1 and the (n, 2, 3) measurements of a dual-IMU board on the foot (the two
+    IMUs' errors drawn independently)."""
+    truth = simulate_walk(opts.path, opts.duration_s, rate_hz=1000.0, speed_mps=opts.speed_mps, seed=opts.seed)
+    board = rigid_board(truth, opts.board_lever_b_m or opts.lever_b_m or DEFAULT_LEVER_B_M)
+    acc = np.empty_like(board.acc_b_mps2)
+    gyr = np.empty_like(board.gyr_b_radps)
+    for i in range(2):
+        acc[:, i], gyr[:, i], _ = corrupt(
+            board.acc_b_mps2[:, i], board.gyr_b_radps[:, i], truth.rate_hz, IMU_GRADES[opts.grade], seed=opts.seed + i
+        )
+    return truth, acc, gyr
+
+
 def run_demo(opts: DemoOptions) -> int:
     """Run the demo; returns the process exit code."""
     if opts.path not in PATHS:
         raise ValueError(f"unknown path {opts.path!r}; choose one of {', '.join(PATHS)}")
     if opts.feet not in (1, 2):
         raise ValueError(f"the demo emulates 1 or 2 feet, not {opts.feet}")
+    if opts.dual_imu and opts.feet != 1:
+        raise ValueError("the dual-IMU demo emulates one shoe")
     feet = ("foot",) if opts.feet == 1 else ("left", "right")
-    truths = [demo_truth(opts, k) for k in range(len(feet))]
+    truths = [dual_demo_truth(opts)] if opts.dual_imu else [demo_truth(opts, k) for k in range(len(feet))]
     truth = truths[0][0]
+    board = " with a dual-IMU board" if opts.dual_imu else ""
     print(
-        f"footnav demo: {len(feet)} emulated shoe(s) ({opts.grade}), {opts.path} walk, "
+        f"footnav demo: {len(feet)} emulated shoe(s){board} ({opts.grade}), {opts.path} walk, "
         f"{opts.duration_s:.0f} s at {opts.speed_mps:.1f} m/s, 1 kHz over a pseudo-terminal",
         file=sys.stderr,
     )
@@ -152,7 +189,13 @@ def run_demo(opts: DemoOptions) -> int:
         cfg.set("unit.profile", PROFILE_OF_GRADE[opts.grade], f"demo (grade {opts.grade})")
     session_id = new_session_id("demo")
     views, notes = open_session_views(
-        save=opts.save, want_viewer=opts.viewer, web=opts.web, feet=feet, recording_id=session_id, notice=notice
+        save=opts.save,
+        want_viewer=opts.viewer,
+        web=opts.web,
+        feet=feet,
+        recording_id=session_id,
+        notice=notice,
+        dual_runs=feet if opts.dual_imu else (),
     )
     for note in notes:
         print(note, file=sys.stderr)
@@ -164,16 +207,41 @@ def run_demo(opts: DemoOptions) -> int:
         views.log_event(
             f"demo: {opts.path}, {opts.duration_s:.0f} s, grade {opts.grade}, feet {', '.join(feet)}", t_s=0.0
         )
-    mcu_id = MISCALIBRATED_MCU_ID if opts.miscalibrated else None
-    servers = [
-        PtyShoeServer(t.t_s, acc, gyr, speed=opts.realtime, record=False, mcu_id=mcu_id) for t, acc, gyr in truths
-    ]
+    if opts.dual_imu:
+        t_dual, acc_dual, gyr_dual = truths[0]
+        servers = [
+            PtyShoeServer(
+                t_dual.t_s,
+                acc_dual[:, 0],
+                gyr_dual[:, 0],
+                speed=opts.realtime,
+                record=False,
+                imu_acc_b_mps2=acc_dual,
+                imu_gyr_b_radps=gyr_dual,
+            )
+        ]
+    else:
+        mcu_id = MISCALIBRATED_MCU_ID if opts.miscalibrated else None
+        servers = [
+            PtyShoeServer(t.t_s, acc, gyr, speed=opts.realtime, record=False, mcu_id=mcu_id)
+            for t, acc, gyr in truths
+        ]
     extra = {"command": "footnav demo", "emulator": f"{opts.path} {opts.grade}"}
     capture = open_capture(cfg, session_id, enabled=opts.capture, extra=extra)
     status = StatusLine(feet=feet)
     nav_config = cfg.nav_config()
+    lever = opts.lever_b_m or DEFAULT_LEVER_B_M
+    dual_config = DualNavConfig(
+        filter=DualEskfConfig(profile=nav_config.profile), detector=nav_config.detector, lever_b_m=lever
+    )
     runs = [
-        FootRun(foot, server.port, Navigator(nav_config, rate_hz=truth.rate_hz))
+        FootRun(
+            foot,
+            server.port,
+            DualNavigator(dual_config, rate_hz=truth.rate_hz)
+            if opts.dual_imu
+            else Navigator(nav_config, rate_hz=truth.rate_hz),
+        )
         for foot, server in zip(feet, servers, strict=True)
     ]
     # Faster than real time the emulator waits for footnav, so footnav waits for the Rerun loggers
@@ -183,6 +251,8 @@ def run_demo(opts: DemoOptions) -> int:
         foot_sinks(run, views, status, two_feet=two, put_timeout_s=put_timeout_s)
         if opts.collect is not None:
             run.sinks.append(opts.collect(run.foot))
+        if views is not None and isinstance(run.navigator, DualNavigator):
+            run.sinks.append(dual_view_sink(run.navigator, views, run.foot))
         if capture is not None:
             run.tap = capture.add_unit(unit_header(run.foot, run.port, "pty (emulator)", cfg, 0))
     server_of = dict(zip(feet, servers, strict=True))
@@ -200,7 +270,8 @@ def run_demo(opts: DemoOptions) -> int:
             capture=run.tap,
             on_open=lambda unit: attach_unit(run, unit),
             on_link_event=link_reporter(run, views, capture, two_feet=two),
-            calibration=calibration_lookup(cfg, run.foot, capture, views, two_feet=two),
+            calibration=None if opts.dual_imu else calibration_lookup(cfg, run.foot, capture, views, two_feet=two),
+            mode=RawImuMode(imu_mask=DUAL_IMU_MASK) if opts.dual_imu else None,
         )
 
     interrupted = False
@@ -229,4 +300,49 @@ def run_demo(opts: DemoOptions) -> int:
             continue
         for line in summary.lines():
             print(prefix + line)
+        if isinstance(run.navigator, DualNavigator):
+            for line in dual_summary_lines(run.navigator, truths[0][1], truths[0][2], lever):
+                print(prefix + line)
     return code
+
+
+def dual_view_sink(navigator: DualNavigator, views: SessionViews, run: str) -> NavSink:
+    """A sink that shows the dual-IMU board's own outputs for each batch: both IMUs' tracks (rigidly
+    ``C m`` apart) and the constraint residuals (equal rate, equal specific force in stance)."""
+
+    def show(nav: NavBatch) -> None:
+        track = navigator.last_track
+        if track is None or track.pos1_n_m.shape[0] != len(nav):
+            return
+        views.log_dual(
+            DualRunView(
+                t_s=nav.t_s,
+                truth_n_m=None,
+                tracks_n_m={},
+                imu_tracks_n_m={"imu1": track.pos_imu_n_m[:, 0], "imu2": track.pos_imu_n_m[:, 1]},
+                residuals={
+                    "rate_diff_dps": np.degrees(track.residual_rate_radps),
+                    "force_diff_mps2": track.residual_force_mps2,
+                },
+            ),
+            run=run,
+        )
+
+    return show
+
+
+def dual_summary_lines(
+    navigator: DualNavigator,
+    acc_b_mps2: NDArray[np.float64],
+    gyr_b_radps: NDArray[np.float64],
+    lever: tuple[float, float, float],
+) -> list[str]:
+    """What the dual-IMU demo adds: faults of either IMU, and the lever-arm check on what was sent."""
+    lines = [f"dual-IMU: {m}" for m in navigator.messages] or ["dual-IMU: both IMUs usable at every sample"]
+    _, _, stance = DualNavigator(navigator.config, navigator.rate_hz).detector.update(
+        np.nan_to_num(acc_b_mps2[:, 0]), np.nan_to_num(gyr_b_radps[:, 0])
+    )
+    sigma = get_profile(navigator.config.filter.profile.name).acc_noise_mps2_rthz * math.sqrt(navigator.rate_hz)
+    check = check_lever_arm(acc_b_mps2, gyr_b_radps, stance, np.asarray(lever), navigator.rate_hz, sigma_acc_mps2=sigma)
+    lines.append(f"dual-IMU: {check.message}")
+    return lines

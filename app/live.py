@@ -32,6 +32,7 @@ from app.status import StatusLine
 from device.capture import CaptureTap, CaptureWriter, UnitHeader
 from device.links import LinkEvent, LinkGap, ReconnectingLink
 from device.unit import OpenShoeUnit
+from pipeline.dual_navigator import DualNavigator
 from pipeline.errors import DeviceError, FootnavError
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import Navigator
@@ -116,7 +117,7 @@ class FootRun:
 
     foot: str
     port: str
-    navigator: Navigator
+    navigator: Navigator | DualNavigator
     result: SerialSessionResult = field(default_factory=SerialSessionResult)
     tap: CaptureTap | None = None
     health: LinkHealth | None = None

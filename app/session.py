@@ -15,19 +15,19 @@ import dataclasses
 import logging
 from collections.abc import AsyncGenerator, AsyncIterator, Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal, cast
+from typing import TYPE_CHECKING, Any, Literal, cast
 
 import numpy as np
 
 from app.status import FootStatus, StatusLine
 from device import links
 from device.links import LinkEvent, ReconnectingLink
-from device.unit import CaptureTap, LinkStats, OpenShoeUnit
+from device.raw_imu import RawImuBatch
+from device.unit import CaptureTap, LinkStats, Mode, OpenShoeUnit, RawImuMode
 from pipeline.calibration import CalibrationError, ImuCalibration
 from pipeline.errors import DeviceError
 from pipeline.nav_types import NavBatch
-from pipeline.navigator import Navigator
-from pipeline.runner import NavSink, run_pipeline
+from pipeline.runner import BatchNavigator, NavSink, run_pipeline
 from pipeline.samples import ImuBatch
 
 if TYPE_CHECKING:
@@ -195,6 +195,14 @@ class LinkHealth:
         self._t_next = t_last + LINK_HEALTH_PERIOD_S
 
 
+async def _raw_batches(unit: OpenShoeUnit) -> AsyncGenerator[RawImuBatch, None]:
+    """Only the :class:`RawImuBatch` es of the unit's stream."""
+    async with contextlib.aclosing(unit.batches()) as stream:
+        async for batch in stream:
+            if isinstance(batch, RawImuBatch):
+                yield batch
+
+
 async def _session_samples(
     unit: OpenShoeUnit,
     result: SerialSessionResult,
@@ -205,8 +213,10 @@ async def _session_samples(
     idle_notice_s: float | None = IDLE_NOTICE_S,
     window: tuple[float, float] | None = None,
     on_window: Callable[[], None] | None = None,
-) -> AsyncIterator[ImuBatch]:
-    """The unit's batches with time rebased to the session's first sample; ends after
+    raw: bool = False,
+) -> AsyncIterator[Any]:
+    """The unit's batches (``ImuBatch``, or ``RawImuBatch`` with ``raw``: the multi-IMU output
+    0x28 of e.g. the dual-IMU board) with time rebased to the session's first sample; ends after
     ``expect_samples`` or when ``source_done()`` and the link has gone quiet.
 
     ``host_clock`` maps the driver's host stamp of a batch to another (a replay's captured time).
@@ -214,9 +224,9 @@ async def _session_samples(
     passed on (``on_window()`` is called at the first one passed on), the stream ends after ``end``."""
     in_window = window is None
     received = 0
-    batches = cast(AsyncGenerator[ImuBatch, None], unit.imu_batches())
+    batches = cast(AsyncGenerator[Any, None], _raw_batches(unit) if raw else unit.imu_batches())
     # The pending anext survives idle timeouts: cancelling it (asyncio.wait_for) would end the generator.
-    pending: asyncio.Future[ImuBatch] | None = None
+    pending: asyncio.Future[Any] | None = None
     async with contextlib.aclosing(batches):
         try:
             while expect_samples is None or received < expect_samples:
@@ -280,7 +290,7 @@ async def _corrected(samples: AsyncIterator[ImuBatch], calibration: ImuCalibrati
 
 async def run_serial_session(
     port: str,
-    navigator: Navigator,
+    navigator: BatchNavigator[Any],
     sinks: Sequence[NavSink],
     *,
     rate_divider_log2: int = 0,
@@ -293,6 +303,7 @@ async def run_serial_session(
     on_open: Callable[[OpenShoeUnit], None] | None = None,
     on_link_event: Callable[[LinkEvent], None] | None = None,
     calibration: CalibrationLookup | None = None,
+    mode: Mode | None = None,
 ) -> SerialSessionResult:
     """:func:`run_device_session` on the serial port ``port``."""
     return await run_device_session(
@@ -309,12 +320,13 @@ async def run_serial_session(
         on_open=on_open,
         on_link_event=on_link_event,
         calibration=calibration,
+        mode=mode,
     )
 
 
 async def run_device_session(
     address: UnitAddress,
-    navigator: Navigator,
+    navigator: BatchNavigator[Any],
     sinks: Sequence[NavSink],
     *,
     rate_divider_log2: int = 0,
@@ -328,6 +340,7 @@ async def run_device_session(
     on_link_event: Callable[[LinkEvent], None] | None = None,
     ble_backend: BleBackend | None = None,
     calibration: CalibrationLookup | None = None,
+    mode: Mode | None = None,
 ) -> SerialSessionResult:
     """Open the unit at ``address`` through a :class:`~device.links.ReconnectingLink`, start its IMU
     stream, navigate until the stream ends or the task is cancelled (Ctrl-C), then stop the unit and
@@ -343,7 +356,9 @@ async def run_device_session(
     link re-sends on its own; ``on_open`` is called with the unit once the link is open;
     ``ble_backend``: the bleak backend for BLE units (None: the platform's; tests pass bumble's);
     ``calibration``: look the unit's calibration file up by its MCU id and apply it (see
-    :class:`CalibrationLookup`).
+    :class:`CalibrationLookup`);
+    ``mode``: the output mode to start (None: the calibrated-IMU stream at ``rate_divider_log2``);
+    ``RawImuMode`` streams ``RawImuBatch`` es (e.g. the dual-IMU board) to a matching navigator.
 
     Raises:
         DeviceError: the port does not exist or is busy, no Bluetooth stack, the unit is not found or
@@ -364,12 +379,13 @@ async def run_device_session(
         status=status,
         result=result,
         calibration=calibration,
+        mode=mode,
     )
 
 
 async def run_unit_session(
     unit: OpenShoeUnit,
-    navigator: Navigator,
+    navigator: BatchNavigator[Any],
     sinks: Sequence[NavSink],
     *,
     start: bool = True,
@@ -384,6 +400,7 @@ async def run_unit_session(
     window: tuple[float, float] | None = None,
     on_window: Callable[[], None] | None = None,
     calibration: CalibrationLookup | None = None,
+    mode: Mode | None = None,
 ) -> SerialSessionResult:
     """Navigate an open unit's stream (see :func:`run_serial_session`); ``start=False`` for a replay,
     where the captured bytes already hold the start and no stop is sent; ``idle_notice_s=None`` never
@@ -414,8 +431,11 @@ async def run_unit_session(
         if start and calibration is not None:
             stored = await _unit_calibration(unit, calibration)
         if start:
-            await unit.start_imu_stream(rate_divider_log2)
-        samples: AsyncIterator[ImuBatch] = _session_samples(
+            if mode is None:
+                await unit.start_imu_stream(rate_divider_log2)
+            else:
+                await unit.start(mode)
+        samples = _session_samples(
             unit,
             result,
             expect_samples,
@@ -425,9 +445,10 @@ async def run_unit_session(
             idle_notice_s,
             window,
             on_window,
+            raw=isinstance(mode, RawImuMode),
         )
-        if stored is not None:
-            samples = _corrected(samples, stored.calibration)
+        if stored is not None and mode is None:
+            samples = _corrected(cast(AsyncIterator[ImuBatch], samples), stored.calibration)
         await run_pipeline(samples, navigator, [*sinks, keep_last])
     finally:
         result.link = unit.stats

@@ -12,17 +12,28 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import AsyncIterator, Callable, Sequence
+from typing import Protocol, TypeVar
 
 from pipeline.nav_types import NavBatch
-from pipeline.navigator import Navigator
-from pipeline.samples import ImuBatch
 
 NavSink = Callable[[NavBatch], object]  # return values are ignored
 
+BatchT_contra = TypeVar("BatchT_contra", contravariant=True)
+B = TypeVar("B")
+
+
+class BatchNavigator(Protocol[BatchT_contra]):
+    """What the runner drives: ``pipeline.navigator.Navigator`` (``ImuBatch``) or
+    ``pipeline.dual_navigator.DualNavigator`` (two-IMU batches)."""
+
+    def process(self, batch: BatchT_contra) -> NavBatch | None:
+        """Estimates for the batch's samples (None while there are none yet)."""
+        ...
+
 
 async def run_pipeline(
-    source: AsyncIterator[ImuBatch],
-    navigator: Navigator,
+    source: AsyncIterator[B],
+    navigator: BatchNavigator[B],
     sinks: Sequence[NavSink],
     queue_batches: int = 256,
 ) -> None:
@@ -30,7 +41,7 @@ async def run_pipeline(
 
     Raises whatever the source, navigator or a sink raised (the other stage is cancelled).
     """
-    queue: asyncio.Queue[ImuBatch | None] = asyncio.Queue(maxsize=queue_batches)
+    queue: asyncio.Queue[B | None] = asyncio.Queue(maxsize=queue_batches)
 
     async def produce() -> None:
         async for batch in source:

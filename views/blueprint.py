@@ -34,6 +34,7 @@ from views.paths import (
     TIMELINE,
     TRUTH,
     WORLD,
+    DualPaths,
     FootPaths,
 )
 
@@ -87,13 +88,15 @@ def _window(seconds: float) -> rrb.VisibleTimeRange:
 
 
 def build_blueprint(
-    feet: Sequence[str] = ("foot",), *, plot_window_s: float = PLOT_WINDOW_S
+    feet: Sequence[str] = ("foot",), *, plot_window_s: float = PLOT_WINDOW_S, dual_runs: Sequence[str] = ()
 ) -> rrb.Blueprint:
     """The default blueprint for a session with the given feet.
 
     Args:
         feet: foot names (see :class:`views.paths.FootPaths`); the camera frames the whole scene.
         plot_window_s: width of the scrolling clearance/stance window, s.
+        dual_runs: dual-IMU boards in the session (:class:`views.paths.DualPaths`): their IMU tracks
+            are drawn as trails and their constraint residuals get a plot of their own.
     """
     paths = [FootPaths(f) for f in feet]
     overrides: dict[str, list[rrb.VisibleTimeRanges | rr.Points3D]] = {}
@@ -102,6 +105,9 @@ def build_blueprint(
         overrides[p.truth] = [_trail(), rr.Points3D.from_fields(radii=TRUTH_RADIUS_M, show_labels=False)]
         overrides[p.steps] = [_trail(), rr.Points3D.from_fields(radii=STEP_RADIUS_M, show_labels=False)]
         overrides[p.step_cov] = [_trail()]
+    for run in dual_runs:
+        for imu in ("imu1", "imu2"):
+            overrides[DualPaths(run).imu(imu)] = [_trail(), rr.Points3D.from_fields(radii=TRACK_RADIUS_M)]
     scene = rrb.Spatial3DView(
         name="Foot track",
         origin=f"/{WORLD}",
@@ -127,13 +133,19 @@ def build_blueprint(
             series("ZUPT detector (statistic, threshold)", "detector"),
             series("Position σ [m]", "pos_sigma", windowed=False),
         ),
+        *[
+            rrb.TimeSeriesView(
+                name=f"Dual-IMU residuals ({run})", origin=f"/{DualPaths(run).plots}", time_ranges=window
+            )
+            for run in dual_runs
+        ],
         rrb.Tabs(
             series("Link: samples/s", "rate", windowed=False),
             series("Link: lost packets, reconnects", "link_errors", windowed=False),
             rrb.StateTimelineView(name="Gait", origin=f"/{GAIT}"),
             rrb.TextLogView(name="Events", origin=f"/{EVENTS}"),
         ),
-        row_shares=[3, 3, 3, 2],
+        row_shares=[3, 3, 3, *([2] * len(dual_runs)), 2],
     )
     return rrb.Blueprint(
         rrb.Horizontal(scene, plots, column_shares=[3, 2]),

@@ -31,7 +31,8 @@ from rerun.sinks import LogSinkLike
 from pipeline.nav_types import NavBatch
 from views import convert
 from views.blueprint import build_blueprint, floor_patch, static_setup
-from views.paths import DEFAULT_FOOT, EVENTS, FootPaths
+from views.dual_imu import DualRunView, dual_columns, static_styles
+from views.paths import DEFAULT_FOOT, EVENTS, DualPaths, FootPaths
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +57,8 @@ LINE_POINT_SPACING_S = 0.1
 LINE_MAX_POINTS = 500
 """... and halves its points (doubling the spacing) whenever it holds more than this, so each
 re-log costs at most ~6 kB however long the session runs."""
+DUAL_TRACK_EVERY = 10
+"""A dual-IMU board's per-IMU tracks are logged every this many samples."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,6 +73,12 @@ class _Truth:
     foot: str
     t_s: NDArray[np.float64]
     pos_n_m: NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class _Dual:
+    run: str
+    view: DualRunView
 
 
 @dataclass(frozen=True, slots=True)
@@ -152,6 +161,7 @@ class RerunLogger:
         series_every: log speed and heading every n-th sample.
         max_queued_samples: queue budget; beyond it ``put`` drops (see module docstring).
         flush_period_s: batching period of the thread.
+        dual_runs: dual-IMU boards that :meth:`log_dual` will be given (blueprint: trails and a plot).
 
     Raises:
         ValueError: no sinks given.
@@ -168,11 +178,14 @@ class RerunLogger:
         series_every: int = DEFAULT_SERIES_EVERY,
         max_queued_samples: int = DEFAULT_MAX_QUEUED_SAMPLES,
         flush_period_s: float = FLUSH_PERIOD_S,
+        dual_runs: Sequence[str] = (),
     ) -> None:
         if not sinks:
             raise ValueError("RerunLogger needs at least one sink (a viewer or a file); none were given")
         self.recording_id = recording_id
         self.feet = tuple(feet)
+        self.dual_runs = tuple(dual_runs)
+        self._dual_styled: set[str] = set()
         self._paths = {f: FootPaths(f) for f in self.feet}
         self._sinks = tuple(sinks)
         self._sigma_scale = sigma_scale
@@ -236,6 +249,13 @@ class RerunLogger:
         if not self._closed:
             self._queue.put(_Event(text, level, t_s))
 
+    def log_dual(self, view: DualRunView, *, run: str) -> None:
+        """Queue a dual-IMU board's tracks and constraint residuals (:mod:`views.dual_imu`); not
+        counted against the sample budget (a tenth of the tracks' points and a few residual rows)."""
+        with self._lock:
+            if not self._closed:
+                self._queue.put(_Dual(run, view))
+
     def log_truth(
         self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT
     ) -> None:
@@ -295,7 +315,7 @@ class RerunLogger:
     def _run(self) -> None:
         rec = self.recording
         try:
-            rec.set_sinks(*self._sinks, default_blueprint=build_blueprint(self.feet))
+            rec.set_sinks(*self._sinks, default_blueprint=build_blueprint(self.feet, dual_runs=self.dual_runs))
             for path, archetype in static_setup(self.feet):
                 rec.log(path, archetype, static=True)
         except Exception as exc:  # no usable sink: drain and discard rather than buffer in memory
@@ -322,6 +342,9 @@ class RerunLogger:
                 links.append(item)
                 if len(links) >= 64:
                     self._guarded(self._send_links, links)
+            elif isinstance(item, _Dual):
+                self._guarded(self._send_dual, item)
+                continue
             elif isinstance(item, _Truth):
                 self._flush(pending, events)  # keep the order: truth after earlier nav
                 n_pending, deadline = 0, None
@@ -456,6 +479,15 @@ class RerunLogger:
                 columns=rr.LineStrips3D.columns(strips=[np.asarray(line.points, dtype=np.float32)]),
             )
             line.logged_t_s, line.logged_wall, line.dirty = t, now, False
+
+    def _send_dual(self, item: _Dual) -> None:
+        paths = DualPaths(item.run)
+        if item.run not in self._dual_styled:
+            for entity, archetype in static_styles(item.view, paths):
+                self.recording.log(entity, archetype, static=True)
+            self._dual_styled.add(item.run)
+        for entity, index, columns in dual_columns(item.view, paths, track_every=DUAL_TRACK_EVERY):
+            self.recording.send_columns(entity, indexes=[index], columns=columns)
 
     def _send_truth(self, truth: _Truth) -> None:
         self.recording.send_columns(

@@ -22,6 +22,7 @@ import rerun as rr
 from numpy.typing import NDArray
 
 from pipeline.nav_types import NavBatch
+from views.dual_imu import DualRunView
 from views.logger import RerunLogger
 from views.paths import DEFAULT_FOOT
 from views.sinks import (
@@ -135,6 +136,11 @@ class SessionViews:
         for out in self.live:
             out.logger.log_truth(pos_n_m, t_s=t_s, foot=foot)
 
+    def log_dual(self, view: DualRunView, *, run: str) -> None:
+        """A dual-IMU board's tracks and constraint residuals, on every live output."""
+        for out in self.live:
+            out.logger.log_dual(view, run=run)
+
     def log_link(
         self, *, foot: str = DEFAULT_FOOT, t_s: float, rate_hz: float, lost_packets: int, reconnects: int = 0
     ) -> None:
@@ -169,6 +175,7 @@ def open_session_views(
     recording_id: str,
     notice: Callable[[str], None],
     environ: Mapping[str, str] | None = None,
+    dual_runs: Sequence[str] = (),
 ) -> tuple[SessionViews | None, list[str]]:
     """Start a session's outputs and describe them.
 
@@ -184,7 +191,7 @@ def open_session_views(
     notes: list[str] = []
 
     def logger(sink: rr.GrpcSink | rr.FileSink) -> RerunLogger:
-        return RerunLogger([sink], recording_id=recording_id, feet=feet)
+        return RerunLogger([sink], recording_id=recording_id, feet=feet, dual_runs=dual_runs)
 
     fallback = False
     if web:

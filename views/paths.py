@@ -144,3 +144,52 @@ class FootPaths:
     def gait(self) -> str:
         """Stance/swing state lane (StateChange, logged on transitions)."""
         return f"{GAIT}/{self.foot}"
+
+
+DUAL = "dual"
+"""Root of the dual-IMU board's entities (under ``world/`` and ``plots/``)."""
+
+
+@dataclass(frozen=True, slots=True)
+class DualPaths:
+    """Entity paths of one dual-IMU run (e.g. one course of ``footnav experiment dual-imu``).
+
+    - ``world/dual/<run>/track/<method>``  Points3D, IMU 1's track as each method estimates it
+      (``single``, ``classic``, ``paper``, ``footnav``: the fused tracks);
+    - ``world/dual/<run>/imu/<imu>``  Points3D, each IMU's own track (``imu1``, ``imu2``);
+    - ``world/dual/<run>/truth``  Points3D, IMU 1's true track;
+    - ``plots/dual/<run>/<residual>/<axis>``  Scalars, a constraint residual over time.
+    """
+
+    run: str
+
+    def __post_init__(self) -> None:
+        if not self.run or not self.run.isidentifier():
+            raise ValueError(f"run name must be a plain identifier like 'rectangle', got {self.run!r}")
+
+    @property
+    def root(self) -> str:
+        """``world/dual/<run>``."""
+        return f"{WORLD}/{DUAL}/{self.run}"
+
+    def track(self, method: str) -> str:
+        """IMU 1's track as ``method`` estimates it."""
+        return f"{self.root}/track/{method}"
+
+    def imu(self, imu: str) -> str:
+        """One IMU's own track."""
+        return f"{self.root}/imu/{imu}"
+
+    @property
+    def truth(self) -> str:
+        """IMU 1's true track."""
+        return f"{self.root}/truth"
+
+    @property
+    def plots(self) -> str:
+        """``plots/dual/<run>``: the residual plots."""
+        return f"{PLOTS}/{DUAL}/{self.run}"
+
+    def residual(self, name: str, axis: str) -> str:
+        """One axis of a constraint residual."""
+        return f"{self.plots}/{name}/{axis}"

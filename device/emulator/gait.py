@@ -279,6 +279,7 @@ def simulate_walk(
     *,
     seed: int = 0,
     initial_still_s: float = 3.0,
+    max_strides: int | None = None,
 ) -> GaitTruth:
     """Simulate one instrumented foot walking a course, with its true IMU signals.
 
@@ -296,6 +297,9 @@ def simulate_walk(
         Seed of the stride-to-stride variation (timing, clearance, pitch and roll amplitudes).
     initial_still_s : float
         Standing still before the first stride, s.
+    max_strides : int or None
+        Walk at most this many strides (e.g. one lap, ``paths.footholds(...).lap_strides``), then rest
+        to the end of the record; None walks as many as fit.
 
     Returns
     -------
@@ -346,6 +350,8 @@ def simulate_walk(
     swing_end_s = swing_start_s + swing_s
     fits = swing_end_s + HEEL_STRIKE_DURATION_S + FINAL_REST_S <= t_last_s
     m = int(np.count_nonzero(np.cumprod(fits)))
+    if max_strides is not None:
+        m = min(m, max(0, max_strides))
     swing_start_s, swing_end_s, swing_s = swing_start_s[:m], swing_end_s[:m], swing_s[:m]
 
     foot_pos_n_m = feet.pos_n_m[: m + 1] - feet.pos_n_m[0]

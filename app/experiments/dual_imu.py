@@ -1,0 +1,252 @@
+"""The dual-IMU board against single-IMU ZUPT on the paper's two courses (issue 6).
+
+For each course (the 18 × 9 m rectangle walked once round; the stair course: 24 steps of
+0.343 m × 0.16 m up, the 6.415 × 1.26 m landing, and back down) and each seed, the emulator walks a
+dual-IMU board (lever arm 1 cm, 1 cm, 0; two ICM-20948-class IMUs with independent errors) and
+four filters navigate the same record with the same stance samples (footnav's SHOE detector with
+its adaptive threshold, run on IMU 1):
+
+- ``single``: footnav's 15-state ESKF (ZUPT + χ²-gated ZARU, both biases estimated) on IMU 1;
+- ``classic``: the same filter with its bias states frozen (the classic 9-state OpenShoe ZUPT
+  filter: position, velocity, attitude; Nilsson et al. 2012), the gyro bias fixed at IMU 1's mean
+  rate over the first second of standing (the start-up calibration the paper filter gets too);
+- ``paper``: the reconstructed filter of Chen et al. (2022), :mod:`pipeline.dual_imu_paper`;
+- ``footnav``: footnav's rigid-board dual-IMU ESKF, :mod:`pipeline.dual_imu_eskf`.
+
+Errors are 3D distances from IMU 1's true position at every sample; per run the maximum and the
+mean, then averaged over the seeds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from device.emulator.dual_imu import DEFAULT_GRADE, DEFAULT_LEVER_B_M, DualImuRecording, simulate_dual_imu
+from pipeline import eskf
+from pipeline.alignment import align_from_still
+from pipeline.detectors import StreamingDetector
+from pipeline.dual_imu_eskf import DualEskfConfig, DualEskfTrack, run_dual_eskf
+from pipeline.dual_imu_paper import DualTrack, PaperConfig, run_paper
+from pipeline.navigator import NavConfig, filter_parameters, navigate
+from pipeline.profiles import UnitProfile, get_profile
+from views.dual_imu import DualRunView, save_dual_runs
+
+F64 = NDArray[np.float64]
+
+NAME = "dual-imu"
+HELP = "dual-IMU board vs single-IMU ZUPT on the rectangle and the stairs (max and mean position error)"
+
+COURSES: Final = ("rectangle", "stairs")
+METHODS: Final = ("single", "classic", "paper", "footnav")
+LABELS: Final = {
+    "single": "single-IMU ZUPT: footnav 15-state ESKF (ZUPT + gated ZARU, biases estimated), IMU 1",
+    "classic": "classic ZUPT: the same filter, bias states frozen (OpenShoe 9-state), IMU 1; gyro bias = mean "
+    "rate of the first 1 s still (the paper filter's start-up calibration), accelerometer bias 0",
+    "paper": "paper (Chen et al. 2022, reconstructed): linear KF [r1 r2 v1 v2], eqs. 17-19",
+    "footnav": "footnav dual: rigid-board ESKF on both IMUs, both bias sets, rigid-body constraints",
+}
+PROFILE: Final = "generic"
+"""The filters' noise model: a single ICM-20948-class part (``pipeline.profiles``)."""
+DEFAULT_SEEDS: Final = 8
+
+
+def classic_profile(profile: UnitProfile) -> UnitProfile:
+    """``profile`` with the bias states frozen: zero prior and zero random walk (a 9-state filter)."""
+    return dataclasses.replace(
+        profile,
+        acc_bias_init_mps2=1e-12,
+        gyr_bias_init_radps=1e-12,
+        acc_bias_rw_mps3_rthz=0.0,
+        gyr_bias_rw_radps2_rthz=0.0,
+    )
+
+
+def classic_track(
+    t_s: F64, acc_b_mps2: F64, gyr_b_radps: F64, stance: NDArray[np.bool_], rate_hz: float, config: NavConfig
+) -> F64:
+    """(n, 3) positions of the classic 9-state ZUPT filter: footnav's ESKF kernel with the bias states
+    frozen (zero prior and random walk), the given stance samples, and the gyro bias fixed at the mean
+    rate over the first ``PaperConfig.align_s`` of standing (the start-up calibration the paper filter
+    gets too), aligned on the same window."""
+    window = slice(0, round(PaperConfig().align_s * rate_hz))
+    al = align_from_still(acc_b_mps2[window], gyr_b_radps[window])
+    x = np.zeros(16)
+    x[6:10] = al.quat_nb_wxyz
+    x[13:16] = gyr_b_radps[window].mean(axis=0)
+    tilt, yaw = config.init_tilt_sigma_rad, config.init_yaw_sigma_rad
+    sig = np.concatenate(
+        [np.full(3, config.init_pos_sigma_m), np.full(3, config.init_vel_sigma_mps), [tilt, tilt, yaw], np.zeros(6)]
+    )
+    P = np.diag(sig**2)
+    par = filter_parameters(classic_profile(config.profile), rate_hz, al.gravity_mps2, config.dt_max_s)
+    n = t_s.shape[0]
+    pos, vel, quat, cov = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
+    dt = np.diff(t_s, prepend=t_s[0] - 1.0 / rate_hz)
+    counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+    eskf.run_filter(x, P, acc_b_mps2, gyr_b_radps, dt, np.ascontiguousarray(stance), par, pos, vel, quat, cov, counters)
+    return pos
+
+
+@dataclass(frozen=True, slots=True)
+class RunResult:
+    """One course, one seed: the record, each method's IMU-1 track, and its errors.
+
+    Attributes:
+        recording: the emulated dual-IMU walk.
+        stance: (n,) the shared detector output.
+        pos1_n_m: method -> (n, 3) IMU 1's estimated position (NaN before a method could start).
+        max_error_m, mean_error_m: method -> error against IMU 1's truth, m.
+        paper: the paper filter's full output; footnav: footnav's.
+    """
+
+    recording: DualImuRecording
+    stance: NDArray[np.bool_]
+    pos1_n_m: dict[str, F64]
+    max_error_m: dict[str, float]
+    mean_error_m: dict[str, float]
+    paper: DualTrack
+    footnav: DualEskfTrack
+
+
+def evaluate_run(
+    course: str,
+    seed: int,
+    *,
+    lever_b_m: tuple[float, float, float] = DEFAULT_LEVER_B_M,
+    grade: str = DEFAULT_GRADE,
+) -> RunResult:
+    """Walk ``course`` once with seed ``seed`` and navigate it with every method."""
+    rec = simulate_dual_imu(course, seed=seed, lever_b_m=lever_b_m, grade=grade)
+    profile = get_profile(PROFILE)
+    nav_config = NavConfig(profile=profile)
+    acc1 = np.ascontiguousarray(rec.acc_b_mps2[:, 0])
+    gyr1 = np.ascontiguousarray(rec.gyr_b_radps[:, 0])
+    _, _, stance = StreamingDetector(nav_config.detector, rec.rate_hz).update(acc1, gyr1)
+    n = len(rec.t_s)
+    tracks: dict[str, F64] = {}
+    nav, _ = navigate(rec.t_s, acc1, gyr1, rec.rate_hz, nav_config)
+    pos = np.full((n, 3), np.nan)
+    if nav is not None:
+        pos[n - len(nav) :] = nav.pos_n_m
+        if not np.array_equal(nav.stance, stance[n - len(nav) :]):
+            raise AssertionError("the navigator's detector disagrees with the shared one")  # pragma: no cover
+    tracks["single"] = pos
+    tracks["classic"] = classic_track(rec.t_s, acc1, gyr1, stance, rec.rate_hz, nav_config)
+    lever = np.asarray(lever_b_m, dtype=np.float64)
+    paper = run_paper(
+        rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, stance, lever, rec.rate_hz, PaperConfig(profile=profile)
+    )
+    footnav = run_dual_eskf(
+        rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, stance, lever, rec.rate_hz, DualEskfConfig(profile=profile)
+    )
+    tracks["paper"] = paper.pos1_n_m
+    tracks["footnav"] = footnav.pos1_n_m
+    truth = rec.truth.imu1.pos_n_m
+    errors = {m: np.linalg.norm(tracks[m] - truth, axis=1) for m in METHODS}
+    return RunResult(
+        recording=rec,
+        stance=stance,
+        pos1_n_m=tracks,
+        max_error_m={m: float(np.nanmax(e)) for m, e in errors.items()},
+        mean_error_m={m: float(np.nanmean(e)) for m, e in errors.items()},
+        paper=paper,
+        footnav=footnav,
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class TableRow:
+    """Seed-averaged errors of one method on one course, m, and the mean error's ratios."""
+
+    course: str
+    method: str
+    max_error_m: float
+    mean_error_m: float
+    ratio_to_single: float
+    ratio_to_classic: float
+
+
+def error_table(
+    seeds: list[int], courses: tuple[str, ...] = COURSES, *, first_runs: dict[str, RunResult] | None = None
+) -> list[TableRow]:
+    """Run every course and seed; average the per-run max and mean errors over the seeds.
+
+    ``first_runs``, if given, receives each course's run of the first seed (for the recording).
+    """
+    rows: list[TableRow] = []
+    for course in courses:
+        runs = [evaluate_run(course, s) for s in seeds]
+        if first_runs is not None:
+            first_runs[course] = runs[0]
+        mx = {m: float(np.mean([r.max_error_m[m] for r in runs])) for m in METHODS}
+        mean = {m: float(np.mean([r.mean_error_m[m] for r in runs])) for m in METHODS}
+        rows.extend(
+            TableRow(course, m, mx[m], mean[m], mean[m] / mean["single"], mean[m] / mean["classic"]) for m in METHODS
+        )
+    return rows
+
+
+def format_table(rows: list[TableRow], seeds: list[int]) -> str:
+    """The table as text, with the methods spelled out underneath."""
+    lines = [
+        f"position error of IMU 1 (3D, every sample), mean over seeds {seeds[0]}..{seeds[-1]} ({len(seeds)} runs "
+        "per course)",
+        f"{'course':<10} {'method':<8} {'max m':>7} {'mean m':>7} {'mean/single':>12} {'mean/classic':>13}",
+    ]
+    lines += [
+        f"{r.course:<10} {r.method:<8} {r.max_error_m:7.3f} {r.mean_error_m:7.3f} {r.ratio_to_single:12.2f} "
+        f"{r.ratio_to_classic:13.2f}"
+        for r in rows
+    ]
+    lines.append("")
+    lines += [f"{m:<8} {LABELS[m]}" for m in METHODS]
+    lines.append(
+        "same record and same stance samples for all (SHOE detector, adaptive threshold, on IMU 1); "
+        f"IMUs: {DEFAULT_GRADE} grade, independent errors; lever arm {DEFAULT_LEVER_B_M} m; filter profile {PROFILE!r}"
+    )
+    return "\n".join(lines)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``footnav experiment dual-imu``."""
+    parser.add_argument("--seeds", type=int, default=DEFAULT_SEEDS, help=f"runs per course (default {DEFAULT_SEEDS})")
+    parser.add_argument("--first-seed", type=int, default=0, help="first seed (default 0)")
+    parser.add_argument(
+        "--save", type=Path, default=None, metavar="FILE.rrd", help="also write the first seed's runs to a recording"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print the table (and write the recording with ``--save``)."""
+    seeds = list(range(args.first_seed, args.first_seed + max(1, args.seeds)))
+    runs: dict[str, RunResult] = {}
+    rows = error_table(seeds, first_runs=runs)
+    print(format_table(rows, seeds))
+    if args.save is not None:
+        save_dual_runs(args.save, {c: view_of(r) for c, r in runs.items()})
+        print(f"recording of seed {seeds[0]} written to {args.save} (open it with: rerun {args.save})")
+    return 0
+
+
+def view_of(run: RunResult) -> DualRunView:
+    """What the recording shows of one run: the four IMU-1 tracks, each IMU's own track (paper
+    filter: two independently integrated IMUs), truth, and the constraint residuals."""
+    return DualRunView(
+        t_s=run.recording.t_s,
+        truth_n_m=run.recording.truth.imu1.pos_n_m,
+        tracks_n_m=run.pos1_n_m,
+        imu_tracks_n_m={"imu1": run.paper.pos_imu_n_m[:, 0], "imu2": run.paper.pos_imu_n_m[:, 1]},
+        residuals={
+            "paper_rel_pos_mm": run.paper.residual_pos_m * 1e3,
+            "paper_rel_vel_mps": run.paper.residual_vel_mps,
+            "footnav_rate_diff_dps": np.degrees(run.footnav.residual_rate_radps),
+            "footnav_force_diff_mps2": run.footnav.residual_force_mps2,
+        },
+    )
