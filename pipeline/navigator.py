@@ -277,7 +277,7 @@ class Navigator:
             if j < m:
                 stance = bool(still[max(a - 1, 0)])
                 codes[j], heights[j], innov[j] = self.tof.apply(
-                    x, P, int(due.sensor[j]), float(due.range_m[j]), int(due.status[j]), stance
+                    x, P, float(due.t_s[j]), int(due.sensor[j]), float(due.range_m[j]), int(due.status[j]), stance
                 )
                 floors[j] = self.tof.floor_z_m
         return floor_z, RangeOutputs(due.t_s, due.sensor, due.status, heights, codes, innov, floors)
