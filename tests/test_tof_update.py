@@ -49,7 +49,9 @@ def test_jacobian_matches_finite_differences(seed: int) -> None:
     for i in range(N_STATE):
         dx = np.zeros(N_STATE)
         dx[i] = eps
-        numeric[i] = (_g(_inject(x, dx), lever, direction, rho) - _g(_inject(x, -dx), lever, direction, rho)) / (2 * eps)
+        numeric[i] = (_g(_inject(x, dx), lever, direction, rho) - _g(_inject(x, -dx), lever, direction, rho)) / (
+            2 * eps
+        )
     np.testing.assert_allclose(H, numeric, atol=1e-8)
     assert np.any(np.abs(H[6:9]) > 1e-3)  # the attitude part is really exercised
 

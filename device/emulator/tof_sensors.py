@@ -27,6 +27,7 @@ All randomness comes from one seeded generator, so a script is reproducible.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -87,7 +88,7 @@ def ray_cast(origin_n_m: F64, dir_n: F64, floor: Floor, max_range_m: float) -> t
     m = origin_n_m.shape[0]
     out_range = np.full(m, np.nan)
     out_cos = np.full(m, np.nan)
-    edges, levels = floor.edges_x_m, floor.levels_z_m
+    edges = floor.edges_x_m
     for i in range(m):
         sx, sz = float(origin_n_m[i, 0]), float(origin_n_m[i, 2])
         dx, dz = float(dir_n[i, 0]), float(dir_n[i, 2])
@@ -97,7 +98,7 @@ def ray_cast(origin_n_m: F64, dir_n: F64, floor: Floor, max_range_m: float) -> t
             te = (edges - sx) / dx
             ts.extend(sorted(float(t) for t in te if 0.0 < t < max_range_m))
         ts.append(max_range_m)
-        for a, b in zip(ts[:-1], ts[1:], strict=True):
+        for a, b in itertools.pairwise(ts):
             level = float(floor.height_m(np.array([sx + 0.5 * (a + b) * dx]))[0])
             za = sz + a * dz
             if za <= level:
