@@ -9,6 +9,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
+    from pipeline.baro import PressureAltitude
+    from pipeline.clearance import StrideClearance
     from pipeline.tof_aiding import RangeOutputs
 
 F64 = NDArray[np.float64]
@@ -36,6 +38,8 @@ class NavBatch:
             heading uncertainty); ``pos_cov_n_m2`` is its upper-left block.
         floor_z_m: (n,) estimated height of the floor under the IMU (ToF units), else None.
         ranges: the ToF readings handled with these samples and what became of each, else None.
+        strides: per-stride clearance of the swings that ended in these samples, else None.
+        altitude: barometer pressure altitude of the readings received since the last batch, else None.
     """
 
     t_s: F64
@@ -51,6 +55,8 @@ class NavBatch:
     cov_pos_yaw: F64 | None = None
     floor_z_m: F64 | None = None
     ranges: RangeOutputs | None = None
+    strides: StrideClearance | None = None
+    altitude: PressureAltitude | None = None
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])

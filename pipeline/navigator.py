@@ -10,6 +10,7 @@ before the first quiet period cannot be navigated and are counted, not guessed.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -18,6 +19,8 @@ from numpy.typing import NDArray
 
 from pipeline import eskf
 from pipeline.alignment import align_from_still
+from pipeline.baro import PressureAltimeter, PressureAltitude, PressureBatch
+from pipeline.clearance import StrideClearanceTracker
 from pipeline.detectors import DetectorParams, StreamingDetector
 from pipeline.nav_types import NavBatch
 from pipeline.profiles import UnitProfile, get_profile
@@ -121,6 +124,9 @@ class Navigator:
         self.config = config
         self.rate_hz = rate_hz
         self.tof = TofAiding(tof or TofConfig())
+        self.altimeter = PressureAltimeter()
+        self._altitude: list[PressureAltitude] = []
+        self._strides = StrideClearanceTracker()
         self.detector = StreamingDetector(config.detector, rate_hz)
         self.stats = NavStats()
         self._pending: list[tuple[ImuBatch, F64, F64, NDArray[np.bool_]]] = []
@@ -142,6 +148,12 @@ class Navigator:
     def add_ranges(self, readings: RangeBatch) -> None:
         """Queue ToF readings; each is applied when the IMU samples reach its time."""
         self.tof.add(readings)
+
+    def add_pressure(self, readings: PressureBatch) -> None:
+        """Barometer readings: converted to pressure altitude and passed on with the next estimates
+        (shown, not used in estimation: see ``pipeline.baro``)."""
+        if len(readings):
+            self._altitude.append(self.altimeter.update(readings))
 
     def process(self, batch: ImuBatch) -> NavBatch | None:
         """Estimates for the samples of ``batch`` (and any buffered before alignment)."""
@@ -239,7 +251,15 @@ class Navigator:
         s.bad_samples, s.zero_velocity_updates = int(c[eskf.CNT_BAD_SAMPLE]), int(c[eskf.CNT_UPDATES])
         s.zero_rate_updates, s.zero_rate_rejected = int(c[eskf.CNT_ZARU]), int(c[eskf.CNT_ZARU_REJECTED])
         s.samples_out += n
-        return nav_batch(batch, pos, vel, quat, cov, stat, threshold, still, floor_z_m=floor_z, ranges=ranges)
+        out = nav_batch(batch, pos, vel, quat, cov, stat, threshold, still, floor_z_m=floor_z, ranges=ranges)
+        strides = self._strides.update(out.t_s, out.clearance_m, still)
+        altitude = None
+        if self._altitude:
+            altitude = PressureAltitude(
+                np.concatenate([a.t_s for a in self._altitude]), np.concatenate([a.altitude_m for a in self._altitude])
+            )
+            self._altitude = []
+        return dataclasses.replace(out, strides=strides if len(strides) else None, altitude=altitude)
 
     def _run_with_ranges(
         self,
