@@ -90,6 +90,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--pace", type=_pace, default=1.0, metavar="1x|Nx|max", help="emulator speed (default real time)"
     )
     demo.add_argument("--seed", type=int, default=1, help="random seed of the emulated sensor errors")
+    demo.add_argument(
+        "--tof",
+        action="store_true",
+        help="emulate the multi-sensor unit: three ToF range sensors and a barometer, fused for foot clearance",
+    )
 
     live = sub.add_parser(
         "live", help="navigate one connected unit, or two (--left/--right), over USB serial or BLE"
@@ -131,6 +136,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     replay.add_argument(
         "--end", type=_seconds, default=math.inf, metavar="S", help="stop S seconds into the capture"
+    )
+    replay.add_argument(
+        "--without-tof",
+        action="store_true",
+        help="leave the ToF readings out (the inertial-only result of the same recording)",
     )
     _add_config_args(replay)
     _add_output_args(replay, capture=False)
@@ -284,6 +294,7 @@ def _replay(args: argparse.Namespace) -> int:
             viewer=not args.no_viewer,
             web=args.web,
             config_is_explicit=args.config is not None or args.profile is not None,
+            tof=not args.without_tof,
         )
     )
 
@@ -325,6 +336,7 @@ def main(argv: list[str] | None = None) -> int:
                     web=args.web,
                     capture=bool(cfg["session.capture"]),
                     config=cfg,
+                    tof=args.tof,
                 )
             )
         if args.command == "live":

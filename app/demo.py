@@ -33,9 +33,12 @@ from app.live import (
 )
 from app.session import SerialSessionResult, run_serial_session
 from app.status import StatusLine
+from device.emulator.floors import floor_of
 from device.emulator.gait import GaitTruth, simulate_walk
 from device.emulator.imu_errors import IMU_GRADES, corrupt
 from device.emulator.pty_server import PtyShoeServer
+from device.emulator.scripts import BaroScript, TofScript, baro_from_height
+from device.emulator.tof_sensors import TofSensorModel, tof_readings
 from pipeline.navigator import Navigator
 from pipeline.runner import NavSink
 from views.outputs import open_session_views
@@ -73,6 +76,9 @@ class DemoOptions:
     """Sessions folder, filter and detector settings (default: built-in; the profile follows the grade)."""
     collect: Callable[[str], NavSink] | None = None
     """Tests: an extra NavSink per foot (given the foot name)."""
+    tof: bool = False
+    """Emulate the multi-sensor unit: three ToF sensors and a barometer (extension states 0xE1/0xE2),
+    fused by the navigator (``pipeline.tof_aiding``)."""
 
 
 @dataclass(frozen=True)
@@ -119,6 +125,15 @@ def demo_truth(opts: DemoOptions, foot_index: int) -> tuple[GaitTruth, NDArray[n
     return truth, acc, gyr
 
 
+def demo_extensions(opts: DemoOptions, truth: GaitTruth, foot_index: int) -> tuple[TofScript | None, BaroScript | None]:
+    """The ToF and barometer readings of one emulated foot (none unless ``opts.tof``)."""
+    if not opts.tof:
+        return None, None
+    sensors = TofSensorModel(seed=opts.seed + foot_index)
+    tof = tof_readings(truth.t_s, truth.pos_n_m, truth.quat_nb_wxyz, floor_of(opts.path), sensors)
+    return tof, baro_from_height(truth.t_s, truth.pos_n_m[:, 2])
+
+
 def run_demo(opts: DemoOptions) -> int:
     """Run the demo; returns the process exit code."""
     if opts.path not in PATHS:
@@ -150,7 +165,11 @@ def run_demo(opts: DemoOptions) -> int:
         views.log_event(
             f"demo: {opts.path}, {opts.duration_s:.0f} s, grade {opts.grade}, feet {', '.join(feet)}", t_s=0.0
         )
-    servers = [PtyShoeServer(t.t_s, acc, gyr, speed=opts.realtime, record=False) for t, acc, gyr in truths]
+    ext = [demo_extensions(opts, t, k) for k, (t, _, _) in enumerate(truths)]
+    servers = [
+        PtyShoeServer(t.t_s, acc, gyr, speed=opts.realtime, record=False, tof=tof, baro=baro)
+        for (t, acc, gyr), (tof, baro) in zip(truths, ext, strict=True)
+    ]
     extra = {"command": "footnav demo", "emulator": f"{opts.path} {opts.grade}"}
     capture = open_capture(cfg, session_id, enabled=opts.capture, extra=extra)
     status = StatusLine(feet=feet)
@@ -167,7 +186,7 @@ def run_demo(opts: DemoOptions) -> int:
         if opts.collect is not None:
             run.sinks.append(opts.collect(run.foot))
         if capture is not None:
-            run.tap = capture.add_unit(unit_header(run.foot, run.port, "pty (emulator)", cfg, 0))
+            run.tap = capture.add_unit(unit_header(run.foot, run.port, "pty (emulator)", cfg, 0, extensions=opts.tof))
     server_of = dict(zip(feet, servers, strict=True))
 
     async def session(run: FootRun) -> None:
@@ -183,6 +202,7 @@ def run_demo(opts: DemoOptions) -> int:
             capture=run.tap,
             on_open=lambda unit: attach_unit(run, unit),
             on_link_event=link_reporter(run, views, capture, two_feet=two),
+            extensions=opts.tof,
         )
 
     interrupted = False
@@ -211,4 +231,8 @@ def run_demo(opts: DemoOptions) -> int:
             continue
         for line in summary.lines():
             print(prefix + line)
+        if opts.tof:
+            counts = run.navigator.tof.counts.by_reason
+            listed = ", ".join(f"{k} {v}" for k, v in sorted(counts.items(), key=lambda kv: -kv[1]))
+            print(f"{prefix}ToF readings: {listed or 'none received'}")
     return code

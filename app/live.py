@@ -89,7 +89,11 @@ def open_capture(config: Config, session_id: str, *, enabled: bool, extra: dict[
     return writer
 
 
-def unit_header(foot: str, port: str, transport: str, config: Config, rate_divider_log2: int) -> UnitHeader:
+def unit_header(
+    foot: str, port: str, transport: str, config: Config, rate_divider_log2: int, *, extensions: bool = False
+) -> UnitHeader:
+    """The capture header of one unit; ``extensions``: the ToF and barometer states were switched on
+    (a replay then repeats that handshake)."""
     return UnitHeader(
         foot=foot,
         unit=UNIT_KIND,
@@ -101,6 +105,7 @@ def unit_header(foot: str, port: str, transport: str, config: Config, rate_divid
             "rate_divider_log2": rate_divider_log2,
             "rate_hz": BASE_RATE_HZ / 2**rate_divider_log2,
             "nav_config": config.to_json(),
+            "extensions": extensions,
         },
         calibration={
             "on_unit": "factory calibration applied by the unit (calibrated output 0x40)",

@@ -71,6 +71,8 @@ class ReplayOptions:
         start_s, end_s: window in session seconds (device time since the first sample, the
             recording's ``imu_time``), exact to the sample.
         collect: tests: an extra NavSink per foot.
+        tof: pass the unit's ToF readings to the navigator (False: the same capture navigated
+            inertial-only, to measure what the ToF sensors add).
     """
 
     path: Path
@@ -83,6 +85,7 @@ class ReplayOptions:
     web: bool = False
     config_is_explicit: bool = False
     collect: Callable[[str], NavSink] | None = None
+    tof: bool = True
 
 
 def run_replay(opts: ReplayOptions) -> int:
@@ -159,7 +162,8 @@ def run_replay(opts: ReplayOptions) -> int:
         if run.health is not None:
             run.health.stats = lambda: unit.stats
         expect = ends.get(run.foot)
-        rate_divider = int(info.units[feet.index(run.foot)].settings.get("rate_divider_log2", 0))
+        settings = info.units[feet.index(run.foot)].settings
+        rate_divider = int(settings.get("rate_divider_log2", 0))
         await run_unit_session(
             unit,
             run.navigator,
@@ -173,6 +177,8 @@ def run_replay(opts: ReplayOptions) -> int:
             idle_notice_s=None,
             window=(opts.start_s, opts.end_s) if windowed else None,
             on_window=lambda: setattr(link, "paced", True),
+            extensions=bool(settings.get("extensions", False)),
+            use_ranges=opts.tof,
         )
 
     from app.live import run_feet

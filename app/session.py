@@ -21,13 +21,16 @@ import numpy as np
 
 from app.status import FootStatus, StatusLine
 from device import links
+from device.extensions import BaroBatch, TofBatch
 from device.links import LinkEvent, ReconnectingLink
 from device.unit import CaptureTap, LinkStats, OpenShoeUnit
+from pipeline.baro import PressureBatch
 from pipeline.errors import DeviceError
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import Navigator
-from pipeline.runner import NavSink, run_pipeline
+from pipeline.runner import NavSink, SourceItem, run_pipeline
 from pipeline.samples import ImuBatch
+from pipeline.tof_aiding import RangeBatch
 
 if TYPE_CHECKING:
     from device.ble_link import BleBackend
@@ -154,6 +157,17 @@ class LinkHealth:
         self._t_next = t_last + LINK_HEALTH_PERIOD_S
 
 
+def _readings(batch: TofBatch | BaroBatch, t0_s: float, window: tuple[float, float] | None) -> SourceItem | None:
+    """A ToF or barometer batch as the pipeline's readings, on the session clock (None: none left)."""
+    t_s = batch.t_s - t0_s
+    keep = np.ones(t_s.shape, dtype=bool) if window is None else (t_s >= window[0]) & (t_s <= window[1])
+    if not keep.any():
+        return None
+    if isinstance(batch, TofBatch):
+        return RangeBatch(t_s[keep], batch.sensor[keep], batch.range_m[keep], batch.status[keep])
+    return PressureBatch(t_s[keep], batch.pressure_pa[keep])
+
+
 async def _session_samples(
     unit: OpenShoeUnit,
     result: SerialSessionResult,
@@ -164,18 +178,22 @@ async def _session_samples(
     idle_notice_s: float | None = IDLE_NOTICE_S,
     window: tuple[float, float] | None = None,
     on_window: Callable[[], None] | None = None,
-) -> AsyncIterator[ImuBatch]:
-    """The unit's batches with time rebased to the session's first sample; ends after
-    ``expect_samples`` or when ``source_done()`` and the link has gone quiet.
+    use_ranges: bool = True,
+) -> AsyncIterator[SourceItem]:
+    """The unit's IMU batches (and ToF and barometer readings, when the unit sends them) with time
+    rebased to the session's first sample; ends after ``expect_samples`` IMU samples or when
+    ``source_done()`` and the link has gone quiet.
 
     ``host_clock`` maps the driver's host stamp of a batch to another (a replay's captured time).
     ``window = (start, end)`` in session seconds: samples outside it are decoded but not
-    passed on (``on_window()`` is called at the first one passed on), the stream ends after ``end``."""
+    passed on (``on_window()`` is called at the first one passed on), the stream ends after ``end``.
+    Readings before the first IMU sample (no session clock yet) are dropped; ToF readings are dropped
+    when not ``use_ranges``."""
     in_window = window is None
     received = 0
-    batches = cast(AsyncGenerator[ImuBatch, None], unit.imu_batches())
+    batches = cast(AsyncGenerator[ImuBatch | TofBatch | BaroBatch, None], _imu_and_readings(unit))
     # The pending anext survives idle timeouts: cancelling it (asyncio.wait_for) would end the generator.
-    pending: asyncio.Future[ImuBatch] | None = None
+    pending: asyncio.Future[ImuBatch | TofBatch | BaroBatch] | None = None
     async with contextlib.aclosing(batches):
         try:
             while expect_samples is None or received < expect_samples:
@@ -198,6 +216,14 @@ async def _session_samples(
                         batch = fut.result()
                     except StopAsyncIteration:
                         return
+                if not isinstance(batch, ImuBatch):
+                    if isinstance(batch, TofBatch) and not use_ranges:
+                        continue
+                    if result.device_t0_s is not None and (window is None or in_window):
+                        item = _readings(batch, result.device_t0_s, window)
+                        if item is not None:
+                            yield item
+                    continue
                 if host_clock is not None:
                     host = host_clock(int(batch.host_ns[0]))
                     batch = dataclasses.replace(batch, host_ns=np.full(len(batch), host, dtype=np.int64))
@@ -231,6 +257,14 @@ async def _session_samples(
                     await pending
 
 
+async def _imu_and_readings(unit: OpenShoeUnit) -> AsyncGenerator[ImuBatch | TofBatch | BaroBatch, None]:
+    """The IMU, ToF and barometer batches of :meth:`OpenShoeUnit.batches`, in arrival order."""
+    async with contextlib.aclosing(unit.batches()) as stream:
+        async for batch in stream:
+            if isinstance(batch, ImuBatch | TofBatch | BaroBatch):
+                yield batch
+
+
 async def run_serial_session(
     port: str,
     navigator: Navigator,
@@ -245,6 +279,7 @@ async def run_serial_session(
     capture: CaptureTap | None = None,
     on_open: Callable[[OpenShoeUnit], None] | None = None,
     on_link_event: Callable[[LinkEvent], None] | None = None,
+    extensions: bool = False,
 ) -> SerialSessionResult:
     """:func:`run_device_session` on the serial port ``port``."""
     return await run_device_session(
@@ -260,6 +295,7 @@ async def run_serial_session(
         capture=capture,
         on_open=on_open,
         on_link_event=on_link_event,
+        extensions=extensions,
     )
 
 
@@ -278,6 +314,7 @@ async def run_device_session(
     on_open: Callable[[OpenShoeUnit], None] | None = None,
     on_link_event: Callable[[LinkEvent], None] | None = None,
     ble_backend: BleBackend | None = None,
+    extensions: bool = False,
 ) -> SerialSessionResult:
     """Open the unit at ``address`` through a :class:`~device.links.ReconnectingLink`, start its IMU
     stream, navigate until the stream ends or the task is cancelled (Ctrl-C), then stop the unit and
@@ -292,6 +329,8 @@ async def run_device_session(
     ``capture`` sees every byte read and written (the capture file), including the start commands the
     link re-sends on its own; ``on_open`` is called with the unit once the link is open;
     ``ble_backend``: the bleak backend for BLE units (None: the platform's; tests pass bumble's).
+    ``extensions``: also switch on the unit's ToF and barometer states (footnav's extension states
+    0xE1/0xE2); their readings go to the navigator.
 
     Raises:
         DeviceError: the port does not exist or is busy, no Bluetooth stack, the unit is not found or
@@ -311,6 +350,7 @@ async def run_device_session(
         on_idle=on_idle,
         status=status,
         result=result,
+        extensions=extensions,
     )
 
 
@@ -330,10 +370,14 @@ async def run_unit_session(
     idle_notice_s: float | None = IDLE_NOTICE_S,
     window: tuple[float, float] | None = None,
     on_window: Callable[[], None] | None = None,
+    extensions: bool = False,
+    use_ranges: bool = True,
 ) -> SerialSessionResult:
     """Navigate an open unit's stream (see :func:`run_serial_session`); ``start=False`` for a replay,
     where the captured bytes already hold the start and no stop is sent; ``idle_notice_s=None`` never
-    treats a pause as idle (replays); ``window``: see ``_session_samples``. Closes the unit."""
+    treats a pause as idle (replays); ``window``: see ``_session_samples``; ``extensions``: switch the
+    ToF and barometer states on after the start; ``use_ranges=False`` leaves the ToF readings out of
+    the navigation. Closes the unit."""
     result = result if result is not None else SerialSessionResult()
     name = unit.link.name
 
@@ -356,6 +400,8 @@ async def run_unit_session(
     try:
         if start:
             await unit.start_imu_stream(rate_divider_log2)
+            if extensions:
+                await unit.enable_extensions(tof=True, baro=True)
         samples = _session_samples(
             unit,
             result,
@@ -366,6 +412,7 @@ async def run_unit_session(
             idle_notice_s,
             window,
             on_window,
+            use_ranges,
         )
         await run_pipeline(samples, navigator, [*sinks, keep_last])
     finally:

@@ -2,6 +2,10 @@
 
     source ──▶ [queue] ──▶ navigator ──▶ sinks (callables, each must return quickly)
 
+The source yields IMU sample batches and, from units that have them, ToF range and barometer
+readings, in the order they arrived; readings are queued in the navigator, which applies them when
+its IMU samples reach their time (``Navigator.add_ranges``, ``add_pressure``).
+
 The queue is bounded, so a slow estimator pushes back on the source (the OS and the unit buffer the
 bytes; the capture, written by the source, never drops anything). Sinks must not block: the Rerun
 logger, for example, only enqueues for its own thread. This is the only module of ``pipeline`` that
@@ -13,15 +17,18 @@ from __future__ import annotations
 import asyncio
 from collections.abc import AsyncIterator, Callable, Sequence
 
+from pipeline.baro import PressureBatch
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import Navigator
 from pipeline.samples import ImuBatch
+from pipeline.tof_aiding import RangeBatch
 
 NavSink = Callable[[NavBatch], object]  # return values are ignored
+SourceItem = ImuBatch | RangeBatch | PressureBatch
 
 
 async def run_pipeline(
-    source: AsyncIterator[ImuBatch],
+    source: AsyncIterator[SourceItem],
     navigator: Navigator,
     sinks: Sequence[NavSink],
     queue_batches: int = 256,
@@ -30,7 +37,7 @@ async def run_pipeline(
 
     Raises whatever the source, navigator or a sink raised (the other stage is cancelled).
     """
-    queue: asyncio.Queue[ImuBatch | None] = asyncio.Queue(maxsize=queue_batches)
+    queue: asyncio.Queue[SourceItem | None] = asyncio.Queue(maxsize=queue_batches)
 
     async def produce() -> None:
         async for batch in source:
@@ -39,6 +46,12 @@ async def run_pipeline(
 
     async def estimate() -> None:
         while (batch := await queue.get()) is not None:
+            if isinstance(batch, RangeBatch):
+                navigator.add_ranges(batch)
+                continue
+            if isinstance(batch, PressureBatch):
+                navigator.add_pressure(batch)
+                continue
             nav = navigator.process(batch)
             if nav is not None:
                 for sink in sinks:
