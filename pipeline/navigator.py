@@ -22,6 +22,7 @@ from pipeline.alignment import align_from_still
 from pipeline.baro import PressureAltimeter, PressureAltitude, PressureBatch
 from pipeline.clearance import StrideClearanceTracker
 from pipeline.detectors import DetectorParams, StreamingDetector
+from pipeline.height_detector import HeightStanceDetector
 from pipeline.nav_types import NavBatch
 from pipeline.profiles import UnitProfile, get_profile
 from pipeline.samples import ImuBatch
@@ -124,6 +125,14 @@ class Navigator:
         self.config = config
         self.rate_hz = rate_hz
         self.tof = TofAiding(tof or TofConfig())
+        tof_cfg = self.tof.config
+        self.height_detector = (
+            None
+            if tof_cfg.detector.mode == "inertial"
+            else HeightStanceDetector(
+                tof_cfg.detector, np.asarray(tof_cfg.lever_b_m), np.asarray(tof_cfg.dir_b), rate_hz
+            )
+        )
         self.altimeter = PressureAltimeter()
         self._altitude: list[PressureAltitude] = []
         self._strides = StrideClearanceTracker()
@@ -146,8 +155,13 @@ class Navigator:
         return None if self._x is None else self._x.copy()
 
     def add_ranges(self, readings: RangeBatch) -> None:
-        """Queue ToF readings; each is applied when the IMU samples reach its time."""
+        """Queue ToF readings; each is applied when the IMU samples reach its time (and, with a
+        height-aided detector, gives the foot's height to the stance detection)."""
         self.tof.add(readings)
+        if self.height_detector is not None and len(readings):
+            order = np.argsort(readings.t_s, kind="stable")
+            r = readings.select(order)
+            self.height_detector.add(r.t_s, r.sensor, r.range_m, r.status)
 
     def add_pressure(self, readings: PressureBatch) -> None:
         """Barometer readings: converted to pressure altitude and passed on with the next estimates
@@ -161,6 +175,8 @@ class Navigator:
             return None
         self.stats.samples_in += len(batch)
         stat, threshold, still = self.detector.update(batch.acc_b_mps2, batch.gyr_b_radps)
+        if self.height_detector is not None:
+            still = self.height_detector.update(batch.t_s, batch.acc_b_mps2, batch.gyr_b_radps, still)
         if self._x is None:
             self._pending.append((batch, stat, threshold, still))
             return self._try_align()

@@ -52,6 +52,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline import tof_update as tu
+from pipeline.height_detector import HeightDetectorParams
 
 F64 = NDArray[np.float64]
 
@@ -143,6 +144,8 @@ class TofConfig:
         below_m: a measured height more than this under the floor is rejected.
         same_floor_m, snap_m, decide_readings, decide_after_s, hit_memory: the floor reference
             (module docstring).
+        update_in_swing: apply readings in swing too (else only in stance).
+        detector: zero-velocity detection with the foot's height (``pipeline.height_detector``).
     """
 
     lever_b_m: tuple[tuple[float, float, float], ...] = DEFAULT_LEVER_B_M
@@ -159,6 +162,7 @@ class TofConfig:
     decide_after_s: float = 0.15
     update_in_swing: bool = True
     hit_memory: int = 12
+    detector: HeightDetectorParams = field(default_factory=HeightDetectorParams)
 
 
 @dataclass(frozen=True, slots=True)
