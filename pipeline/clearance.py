@@ -45,12 +45,24 @@ class StrideClearanceTracker:
         self._t: list[F64] = []
         self._c: list[F64] = []
 
-    def update(self, t_s: F64, clearance_m: F64, stance: NDArray[np.bool_]) -> StrideClearance:
-        """Strides completed within this batch (possibly none)."""
+    def update(self, t_s: F64, clearance_m: F64, stance: NDArray[np.bool_]) -> StrideClearance | None:
+        """Strides completed within this batch (None: none)."""
+        st = np.asarray(stance, dtype=bool)
+        if st.size and bool(st[0]) == bool(st[-1]) and not (st[1:] != st[:-1]).any():  # one phase: fast path
+            if st[0]:
+                if self._in_swing and self._t:
+                    return self._emit_single(float(t_s[0]))
+                self._in_swing, self._seen_stance = False, True
+                if self._t:
+                    self._t, self._c = [], []
+            elif self._seen_stance:
+                self._in_swing = True
+                self._t.append(t_s)
+                self._c.append(clearance_m)
+            return None
         out_t: list[float] = []
         out_min: list[float] = []
         out_max: list[float] = []
-        st = np.asarray(stance, dtype=bool)
         edges = np.flatnonzero(st[1:] != st[:-1]) + 1
         bounds = np.concatenate([[0], edges, [st.size]])
         for a, b in itertools.pairwise(bounds.tolist()):
@@ -67,6 +79,19 @@ class StrideClearanceTracker:
                 if self._in_swing:
                     self._t.append(t_s[a:b])
                     self._c.append(clearance_m[a:b])
+        if not out_t:
+            return None
+        return StrideClearance(np.asarray(out_t), np.asarray(out_min), np.asarray(out_max))
+
+    def _emit_single(self, t_end: float) -> StrideClearance | None:
+        out_t: list[float] = []
+        out_min: list[float] = []
+        out_max: list[float] = []
+        self._finish(t_end, out_t, out_min, out_max)
+        self._in_swing, self._seen_stance = False, True
+        self._t, self._c = [], []
+        if not out_t:
+            return None
         return StrideClearance(np.asarray(out_t), np.asarray(out_min), np.asarray(out_max))
 
     def _finish(self, t_end: float, out_t: list[float], out_min: list[float], out_max: list[float]) -> None:

@@ -10,7 +10,6 @@ before the first quiet period cannot be navigated and are counted, not guessed.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -20,7 +19,7 @@ from numpy.typing import NDArray
 from pipeline import eskf
 from pipeline.alignment import align_from_still
 from pipeline.baro import PressureAltimeter, PressureAltitude, PressureBatch
-from pipeline.clearance import StrideClearanceTracker
+from pipeline.clearance import StrideClearance, StrideClearanceTracker
 from pipeline.detectors import DetectorParams, StreamingDetector
 from pipeline.height_detector import HeightStanceDetector
 from pipeline.nav_types import NavBatch
@@ -267,15 +266,29 @@ class Navigator:
         s.bad_samples, s.zero_velocity_updates = int(c[eskf.CNT_BAD_SAMPLE]), int(c[eskf.CNT_UPDATES])
         s.zero_rate_updates, s.zero_rate_rejected = int(c[eskf.CNT_ZARU]), int(c[eskf.CNT_ZARU_REJECTED])
         s.samples_out += n
-        out = nav_batch(batch, pos, vel, quat, cov, stat, threshold, still, floor_z_m=floor_z, ranges=ranges)
-        strides = self._strides.update(out.t_s, out.clearance_m, still)
+        clearance = pos[:, 2].copy() if floor_z is None else pos[:, 2] - floor_z
+        strides = self._strides.update(batch.t_s, clearance, still)
         altitude = None
         if self._altitude:
             altitude = PressureAltitude(
                 np.concatenate([a.t_s for a in self._altitude]), np.concatenate([a.altitude_m for a in self._altitude])
             )
             self._altitude = []
-        return dataclasses.replace(out, strides=strides if len(strides) else None, altitude=altitude)
+        return nav_batch(
+            batch,
+            pos,
+            vel,
+            quat,
+            cov,
+            stat,
+            threshold,
+            still,
+            floor_z_m=floor_z,
+            ranges=ranges,
+            clearance_m=clearance,
+            strides=strides,
+            altitude=altitude,
+        )
 
     def _run_with_ranges(
         self,
@@ -331,12 +344,17 @@ def nav_batch(
     *,
     floor_z_m: F64 | None = None,
     ranges: RangeOutputs | None = None,
+    clearance_m: F64 | None = None,
+    strides: StrideClearance | None = None,
+    altitude: PressureAltitude | None = None,
 ) -> NavBatch:
     """The :class:`NavBatch` of ``batch``'s samples from the filter's per-sample outputs.
 
     Clearance is the height above ``floor_z_m`` (n,) when the floor under the IMU is known (ToF),
-    else above the floor the walk started on (z = 0).
+    else above the floor the walk started on (z = 0), unless given as ``clearance_m``.
     """
+    if clearance_m is None:
+        clearance_m = pos[:, 2].copy() if floor_z_m is None else pos[:, 2] - floor_z_m
     return NavBatch(
         t_s=batch.t_s,
         pos_n_m=pos,
@@ -346,11 +364,13 @@ def nav_batch(
         stance=still,
         detector_stat=stat,
         detector_threshold=threshold,
-        clearance_m=pos[:, 2].copy() if floor_z_m is None else pos[:, 2] - floor_z_m,
+        clearance_m=clearance_m,
         host_ns=batch.host_ns,
         cov_pos_yaw=cov_pos_yaw,
         floor_z_m=floor_z_m,
         ranges=ranges,
+        strides=strides,
+        altitude=altitude,
     )
 
 
