@@ -110,6 +110,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     live.add_argument("--left", metavar="PORT|ble:NAME", help="the left-foot unit: serial port or ble:NAME")
     live.add_argument("--right", metavar="PORT|ble:NAME", help="the right-foot unit: serial port or ble:NAME")
+    live.add_argument(
+        "--tof",
+        action="store_true",
+        help="a ToF multi-sensor unit: switch on its ToF and barometer states, fuse the ranges",
+    )
     _add_config_args(live)
     live.add_argument(
         "--rate-divider",
@@ -261,6 +266,7 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
             web=args.web,
             capture=bool(cfg["session.capture"]),
             argv=("footnav", *argv),
+            tof=args.tof,
         )
     )
 

@@ -268,6 +268,7 @@ class LiveOptions:
         ble_backend: tests only (never set by the command line): the bleak backend for BLE units, e.g.
             ``device.emulator.ble_backend.bumble_backend(adapter)``; None = the platform's.
         collect: tests only: an extra NavSink per foot (given the foot name).
+        tof: switch on the units' ToF and barometer extension states and fuse the ToF readings.
     """
 
     ports: dict[str, str]
@@ -279,6 +280,7 @@ class LiveOptions:
     argv: tuple[str, ...] = ()
     ble_backend: BleBackend | None = None
     collect: Callable[[str], NavSink] | None = None
+    tof: bool = False
 
 
 def run_live(opts: LiveOptions) -> int:
@@ -328,7 +330,9 @@ async def live_session(opts: LiveOptions) -> int:
             run.sinks.append(opts.collect(run.foot))
         if capture is not None:
             transport = addresses[run.foot].transport
-            run.tap = capture.add_unit(unit_header(run.foot, run.port, transport, cfg, run.rate_divider_log2))
+            run.tap = capture.add_unit(
+                unit_header(run.foot, run.port, transport, cfg, run.rate_divider_log2, extensions=opts.tof)
+            )
 
     async def session(run: FootRun) -> None:
         await run_device_session(
@@ -342,6 +346,7 @@ async def live_session(opts: LiveOptions) -> int:
             on_open=lambda unit: attach_unit(run, unit),
             on_link_event=link_reporter(run, views, capture, two_feet=two_feet),
             ble_backend=opts.ble_backend,
+            extensions=opts.tof,
         )
 
     if views is not None:
