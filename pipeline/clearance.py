@@ -47,18 +47,16 @@ class StrideClearanceTracker:
 
     def update(self, t_s: F64, clearance_m: F64, stance: NDArray[np.bool_]) -> StrideClearance | None:
         """Strides completed within this batch (None: none)."""
-        st = np.asarray(stance, dtype=bool)
-        if st.size and bool(st[0]) == bool(st[-1]) and not (st[1:] != st[:-1]).any():  # one phase: fast path
-            if st[0]:
-                if self._in_swing and self._t:
-                    return self._emit_single(float(t_s[0]))
-                self._in_swing, self._seen_stance = False, True
-                if self._t:
-                    self._t, self._c = [], []
-            elif self._seen_stance:
-                self._in_swing = True
-                self._t.append(t_s)
-                self._c.append(clearance_m)
+        st = stance if stance.dtype == np.bool_ else np.asarray(stance, dtype=bool)
+        if st.all():  # fast paths: the whole batch in one phase (most batches)
+            if self._in_swing and self._t:
+                return self._emit_single(float(t_s[0]))
+            self._in_swing, self._seen_stance = False, True
+            return None
+        if self._seen_stance and not st.any():
+            self._in_swing = True
+            self._t.append(t_s)
+            self._c.append(clearance_m)
             return None
         out_t: list[float] = []
         out_min: list[float] = []
