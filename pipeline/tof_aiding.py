@@ -22,7 +22,9 @@ last stance:
   as observations until the stance ends, and the level is set to the median of the last
   ``decide_readings`` of them; it carries the vertical error of that moment. (Taking a
   new tread's height from the step-edge readings of the swing, while the state was still tied to the
-  old tread, was tried and measured worse on the emulated stairs: 7 cm instead of 2 cm after 70 s.);
+  old tread, was tried and measured worse on the emulated stairs: 7 cm instead of 2 cm after 70 s;
+  so was chaining such observations tread to tread and updating against them in the swing: 1.7-2x
+  the vertical error of ZUPT alone, where this design has 1.4-1.6x less.)
 - in swing, readings are referenced to the last stance floor; a ray that sees another tread gives an
   innovation of about a riser and is rejected as a step edge by the gate of :mod:`.tof_update`.
   A sensor that has seen past an edge stays past it until the next stance: its later readings in the
