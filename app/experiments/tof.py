@@ -28,7 +28,7 @@ from device.emulator.tof_sensors import TofSensorModel, tof_readings
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavConfig, navigate
 from pipeline.profiles import get_profile
-from pipeline.tof_aiding import RangeBatch, TofConfig
+from pipeline.tof_aiding import CODE_NAMES, STATUS_NAMES, RangeBatch, TofConfig
 
 NAME = "tof"
 HELP = "foot clearance and vertical error with and without the ToF sensors (70 s walk, stairs)"
@@ -104,8 +104,7 @@ def compare(rec: Recording, tof: TofConfig | None = None) -> tuple[RunFigures, R
 
 
 def _counts(nav: NavBatch) -> dict[str, int]:
-    from pipeline.tof_aiding import CODE_NAMES, STATUS_NAMES
-
+    """Readings of a navigated recording by what became of them (invalid ones by their status)."""
     r = nav.ranges
     assert r is not None
     counts: dict[str, int] = {}
