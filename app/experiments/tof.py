@@ -33,7 +33,7 @@ from pipeline.tof_aiding import CODE_NAMES, STATUS_NAMES, RangeBatch, TofConfig
 NAME = "tof"
 HELP = "foot clearance and vertical error with and without the ToF sensors (70 s walk, stairs)"
 
-WALKS: tuple[tuple[str, float], ...] = (("rectangle", 70.0), ("stairs", 70.0))
+WALKS: tuple[tuple[str, float], ...] = (("rectangle", 70.0), ("line", 70.0), ("stairs", 70.0))
 """(course, duration s) of the experiment's walks."""
 
 
