@@ -153,3 +153,14 @@ def test_bad_input_on_stairs_is_no_worse_than_zupt_alone() -> None:
     err_z = nav.pos_n_m[still, 2] - t.pos_n_m[first:][still, 2]
     err_z0 = zupt.pos_n_m[still, 2] - t.pos_n_m[first:][still, 2]
     assert np.sqrt(np.mean(err_z**2)) <= np.sqrt(np.mean(err_z0**2))
+
+
+def test_experiment_command_prints_the_side_by_side_table(capsys: pytest.CaptureFixture[str]) -> None:
+    from app.cli import main
+
+    assert main(["experiment", "tof", "--duration", "15"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    rows = [line for line in out if line.startswith(("rectangle", "line", "stairs"))]
+    assert len(rows) == 6  # three walks, each with and without the ToF channel
+    assert sum("ZUPT+ToF" in r and "used" in r for r in rows) == 3
+    assert sum("lower with ToF" in line for line in out) == 3
