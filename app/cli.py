@@ -35,6 +35,17 @@ def _seconds(text: str) -> float:
     return value
 
 
+def _add_stance_arg(p: argparse.ArgumentParser, *, default: str | None) -> None:
+    """``--stance``: the zero-velocity detector of ToF units (``pipeline.height_detector``)."""
+    p.add_argument(
+        "--stance",
+        choices=("inertial", "height", "and", "or"),
+        default=default,
+        help="ToF units: stance from the inertial detector, from the foot's height and angular rate, "
+        "or both (and/or); default: inertial" + ("" if default else ", or as recorded"),
+    )
+
+
 def _add_config_args(p: argparse.ArgumentParser, *, profile: bool = True) -> None:
     from pipeline.profiles import PROFILES
 
@@ -83,6 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_output_args(demo, capture=True)
     _add_config_args(demo)
+    _add_stance_arg(demo, default="inertial")
     demo.add_argument(
         "--feet", type=int, choices=(1, 2), default=1, help="emulated shoes: 1, or 2 (left and right)"
     )
@@ -116,6 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="a ToF multi-sensor unit: switch on its ToF and barometer states, fuse the ranges",
     )
     _add_config_args(live)
+    _add_stance_arg(live, default="inertial")
     live.add_argument(
         "--rate-divider",
         type=int,
@@ -148,6 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="leave the ToF readings out (the inertial-only result of the same recording)",
     )
     _add_config_args(replay)
+    _add_stance_arg(replay, default=None)
     _add_output_args(replay, capture=False)
 
     export = sub.add_parser("export", help="navigate a recording and write one CSV row per sample")
@@ -267,6 +281,7 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
             capture=bool(cfg["session.capture"]),
             argv=("footnav", *argv),
             tof=args.tof,
+            stance=args.stance,
         )
     )
 
@@ -301,6 +316,7 @@ def _replay(args: argparse.Namespace) -> int:
             web=args.web,
             config_is_explicit=args.config is not None or args.profile is not None,
             tof=not args.without_tof,
+            stance=args.stance,
         )
     )
 
@@ -343,6 +359,7 @@ def main(argv: list[str] | None = None) -> int:
                     capture=bool(cfg["session.capture"]),
                     config=cfg,
                     tof=args.tof,
+                    stance=args.stance,
                 )
             )
         if args.command == "live":

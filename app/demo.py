@@ -29,6 +29,7 @@ from app.live import (
     notice,
     open_capture,
     run_feet,
+    tof_config,
     unit_header,
 )
 from app.session import SerialSessionResult, run_serial_session
@@ -76,6 +77,8 @@ class DemoOptions:
     """Sessions folder, filter and detector settings (default: built-in; the profile follows the grade)."""
     collect: Callable[[str], NavSink] | None = None
     """Tests: an extra NavSink per foot (given the foot name)."""
+    stance: str = "inertial"
+    """Stance detector mode with ToF units: inertial, height, and, or (``pipeline.height_detector``)."""
     tof: bool = False
     """Emulate the multi-sensor unit: three ToF sensors and a barometer (extension states 0xE1/0xE2),
     fused by the navigator (``pipeline.tof_aiding``)."""
@@ -175,7 +178,7 @@ def run_demo(opts: DemoOptions) -> int:
     status = StatusLine(feet=feet)
     nav_config = cfg.nav_config()
     runs = [
-        FootRun(foot, server.port, Navigator(nav_config, rate_hz=truth.rate_hz))
+        FootRun(foot, server.port, Navigator(nav_config, rate_hz=truth.rate_hz, tof=tof_config(opts.stance)))
         for foot, server in zip(feet, servers, strict=True)
     ]
     # Faster than real time the emulator waits for footnav, so footnav waits for the Rerun loggers
@@ -186,7 +189,9 @@ def run_demo(opts: DemoOptions) -> int:
         if opts.collect is not None:
             run.sinks.append(opts.collect(run.foot))
         if capture is not None:
-            run.tap = capture.add_unit(unit_header(run.foot, run.port, "pty (emulator)", cfg, 0, extensions=opts.tof))
+            run.tap = capture.add_unit(
+                unit_header(run.foot, run.port, "pty (emulator)", cfg, 0, extensions=opts.tof, stance=opts.stance)
+            )
     server_of = dict(zip(feet, servers, strict=True))
 
     async def session(run: FootRun) -> None:

@@ -21,7 +21,7 @@ from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -32,9 +32,11 @@ from device.capture import CaptureTap, CaptureWriter, UnitHeader
 from device.links import LinkEvent, LinkGap, ReconnectingLink
 from device.unit import OpenShoeUnit
 from pipeline.errors import DeviceError, FootnavError
+from pipeline.height_detector import HEIGHT_MODES, HeightDetectorParams, HeightMode
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import Navigator
 from pipeline.runner import NavSink
+from pipeline.tof_aiding import TofConfig
 from views.outputs import SessionViews, open_session_views
 
 if TYPE_CHECKING:
@@ -90,10 +92,17 @@ def open_capture(config: Config, session_id: str, *, enabled: bool, extra: dict[
 
 
 def unit_header(
-    foot: str, port: str, transport: str, config: Config, rate_divider_log2: int, *, extensions: bool = False
+    foot: str,
+    port: str,
+    transport: str,
+    config: Config,
+    rate_divider_log2: int,
+    *,
+    extensions: bool = False,
+    stance: str = "inertial",
 ) -> UnitHeader:
     """The capture header of one unit; ``extensions``: the ToF and barometer states were switched on
-    (a replay then repeats that handshake)."""
+    (a replay then repeats that handshake); ``stance``: the ToF units' stance detector mode."""
     return UnitHeader(
         foot=foot,
         unit=UNIT_KIND,
@@ -106,12 +115,20 @@ def unit_header(
             "rate_hz": BASE_RATE_HZ / 2**rate_divider_log2,
             "nav_config": config.to_json(),
             "extensions": extensions,
+            "stance": stance,
         },
         calibration={
             "on_unit": "factory calibration applied by the unit (calibrated output 0x40)",
             "profile": config["unit.profile"],
         },
     )
+
+
+def tof_config(stance: str) -> TofConfig:
+    """ToF aiding settings with the stance detector mode ``stance`` (inertial, height, and, or)."""
+    if stance not in HEIGHT_MODES:
+        raise ValueError(f"unknown stance detector {stance!r}; expected one of {', '.join(HEIGHT_MODES)}")
+    return TofConfig(detector=HeightDetectorParams(mode=cast(HeightMode, stance)))
 
 
 @dataclass
@@ -269,6 +286,7 @@ class LiveOptions:
             ``device.emulator.ble_backend.bumble_backend(adapter)``; None = the platform's.
         collect: tests only: an extra NavSink per foot (given the foot name).
         tof: switch on the units' ToF and barometer extension states and fuse the ToF readings.
+        stance: stance detector mode with ToF units (``pipeline.height_detector.HeightDetectorParams``).
     """
 
     ports: dict[str, str]
@@ -281,6 +299,7 @@ class LiveOptions:
     ble_backend: BleBackend | None = None
     collect: Callable[[str], NavSink] | None = None
     tof: bool = False
+    stance: str = "inertial"
 
 
 def run_live(opts: LiveOptions) -> int:
@@ -319,7 +338,7 @@ async def live_session(opts: LiveOptions) -> int:
         FootRun(
             foot,
             str(addresses[foot]),
-            Navigator(nav_config, rate_hz=BASE_RATE_HZ / 2 ** dividers[foot]),
+            Navigator(nav_config, rate_hz=BASE_RATE_HZ / 2 ** dividers[foot], tof=tof_config(opts.stance)),
             rate_divider_log2=dividers[foot],
         )
         for foot in feet
@@ -331,7 +350,9 @@ async def live_session(opts: LiveOptions) -> int:
         if capture is not None:
             transport = addresses[run.foot].transport
             run.tap = capture.add_unit(
-                unit_header(run.foot, run.port, transport, cfg, run.rate_divider_log2, extensions=opts.tof)
+                unit_header(
+                    run.foot, run.port, transport, cfg, run.rate_divider_log2, extensions=opts.tof, stance=opts.stance
+                )
             )
 
     async def session(run: FootRun) -> None:

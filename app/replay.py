@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from app.config import Config, apply_capture_settings
-from app.live import FootRun, foot_sinks, notice
+from app.live import FootRun, foot_sinks, notice, tof_config
 from app.session import run_unit_session
 from app.status import Progress, StatusLine
 from device.capture import EXPECTED, CaptureReplayLink, summarize_capture
@@ -73,6 +73,7 @@ class ReplayOptions:
         collect: tests: an extra NavSink per foot.
         tof: pass the unit's ToF readings to the navigator (False: the same capture navigated
             inertial-only, to measure what the ToF sensors add).
+        stance: stance detector mode with ToF units (None: as recorded in the capture).
     """
 
     path: Path
@@ -86,6 +87,7 @@ class ReplayOptions:
     config_is_explicit: bool = False
     collect: Callable[[str], NavSink] | None = None
     tof: bool = True
+    stance: str | None = None
 
 
 def run_replay(opts: ReplayOptions) -> int:
@@ -138,7 +140,9 @@ def run_replay(opts: ReplayOptions) -> int:
     runs: list[FootRun] = []
     links: dict[str, CaptureReplayLink] = {}
     for k, foot in enumerate(feet):
-        run = FootRun(foot, opts.path.name, Navigator(nav_config, rate_hz=rate_of.get(foot, 1000.0)))
+        recorded = info.units[feet.index(foot)].settings.get("stance", "inertial")
+        tof = tof_config(opts.stance or str(recorded))
+        run = FootRun(foot, opts.path.name, Navigator(nav_config, rate_hz=rate_of.get(foot, 1000.0), tof=tof))
         foot_sinks(run, views, status, two_feet=len(feet) > 1, put_timeout_s=0.0 if realtime else REPLAY_PUT_TIMEOUT_S)
         if opts.collect is not None:
             run.sinks.append(opts.collect(foot))

@@ -30,7 +30,7 @@ def test_demo_with_tof_sensors_live_and_replayed(tmp_path: Path) -> None:
     cfg.set("session.sessions_dir", str(tmp_path), "test")
     got, make = _collector()
     opts = DemoOptions(
-        path="line", duration_s=25.0, viewer=False, realtime=math.inf, config=cfg, collect=make, tof=True
+        path="line", duration_s=25.0, viewer=False, realtime=math.inf, config=cfg, collect=make, tof=True, stance="and"
     )
     assert run_demo(opts) == 0
     live = concat_batches(got["foot"])
@@ -52,8 +52,14 @@ def test_demo_with_tof_sensors_live_and_replayed(tmp_path: Path) -> None:
     got_r, make_r = _collector()
     assert run_replay(ReplayOptions(path=path, config=defaults(), viewer=False, collect=make_r)) == 0
     replayed = concat_batches(got_r["foot"])
-    np.testing.assert_array_equal(replayed.pos_n_m, live.pos_n_m)  # bit for bit, ToF updates included
+    # bit for bit, ToF updates and the recorded stance detector ("and") included
+    np.testing.assert_array_equal(replayed.pos_n_m, live.pos_n_m)
+    np.testing.assert_array_equal(replayed.stance, live.stance)
     np.testing.assert_array_equal(replayed.clearance_m, live.clearance_m)
+
+    got_i, make_i = _collector()
+    assert run_replay(ReplayOptions(path=path, config=defaults(), viewer=False, collect=make_i, stance="inertial")) == 0
+    assert np.any(concat_batches(got_i["foot"]).stance != live.stance)  # the override is what decides
 
     got_n, make_n = _collector()
     assert run_replay(ReplayOptions(path=path, config=defaults(), viewer=False, collect=make_n, tof=False)) == 0
