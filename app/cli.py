@@ -35,6 +35,17 @@ def _seconds(text: str) -> float:
     return value
 
 
+def _add_stance_arg(p: argparse.ArgumentParser, *, default: str | None) -> None:
+    """``--stance``: the zero-velocity detector of ToF units (``pipeline.height_detector``)."""
+    p.add_argument(
+        "--stance",
+        choices=("inertial", "height", "and", "or"),
+        default=default,
+        help="ToF units: stance from the inertial detector, from the foot's height and angular rate, "
+        "or both (and/or); default: inertial" + ("" if default else ", or as recorded"),
+    )
+
+
 def _add_config_args(p: argparse.ArgumentParser, *, profile: bool = True) -> None:
     from pipeline.profiles import PROFILES
 
@@ -90,6 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_output_args(demo, capture=True)
     _add_config_args(demo)
+    _add_stance_arg(demo, default="inertial")
     demo.add_argument(
         "--feet", type=int, choices=(1, 2), default=1, help="emulated shoes: 1, or 2 (left and right)"
     )
@@ -125,6 +137,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --dual-imu: where the emulated board really has IMU 2, m (default: --lever-arm); "
         "a different value shows the lever-arm check",
     )
+    demo.add_argument(
+        "--tof",
+        action="store_true",
+        help="emulate the multi-sensor unit: three ToF range sensors and a barometer, fused for foot clearance",
+    )
 
     live = sub.add_parser(
         "live", help="navigate one connected unit, or two (--left/--right), over USB serial or BLE"
@@ -140,7 +157,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     live.add_argument("--left", metavar="PORT|ble:NAME", help="the left-foot unit: serial port or ble:NAME")
     live.add_argument("--right", metavar="PORT|ble:NAME", help="the right-foot unit: serial port or ble:NAME")
+    live.add_argument(
+        "--tof",
+        action="store_true",
+        help="a ToF multi-sensor unit: switch on its ToF and barometer states, fuse the ranges",
+    )
     _add_config_args(live)
+    _add_stance_arg(live, default="inertial")
     live.add_argument(
         "--rate-divider",
         type=int,
@@ -206,7 +229,13 @@ def build_parser() -> argparse.ArgumentParser:
     replay.add_argument(
         "--end", type=_seconds, default=math.inf, metavar="S", help="stop S seconds into the capture"
     )
+    replay.add_argument(
+        "--without-tof",
+        action="store_true",
+        help="leave the ToF readings out (the inertial-only result of the same recording)",
+    )
     _add_config_args(replay)
+    _add_stance_arg(replay, default=None)
     _add_output_args(replay, capture=False)
 
     export = sub.add_parser("export", help="navigate a recording and write one CSV row per sample")
@@ -325,6 +354,8 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
             web=args.web,
             capture=bool(cfg["session.capture"]),
             argv=("footnav", *argv),
+            tof=args.tof,
+            stance=args.stance,
         )
     )
 
@@ -384,6 +415,8 @@ def _replay(args: argparse.Namespace) -> int:
             viewer=not args.no_viewer,
             web=args.web,
             config_is_explicit=args.config is not None or args.profile is not None,
+            tof=not args.without_tof,
+            stance=args.stance,
         )
     )
 
@@ -429,6 +462,8 @@ def main(argv: list[str] | None = None) -> int:
                     dual_imu=args.dual_imu,
                     lever_b_m=_lever(args.lever_arm),
                     board_lever_b_m=_lever(args.board_lever_arm),
+                    tof=args.tof,
+                    stance=args.stance,
                 )
             )
         if args.command == "live":

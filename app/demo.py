@@ -38,15 +38,19 @@ from app.live import (
     notice,
     open_capture,
     run_feet,
+    tof_config,
     unit_header,
 )
 from app.session import SerialSessionResult, run_serial_session
 from app.status import StatusLine
 from device.emulator.dual_imu import DEFAULT_LEVER_B_M, rigid_board
+from device.emulator.floors import floor_of
 from device.emulator.gait import GaitTruth, simulate_walk
 from device.emulator.icosahedron import MISCALIBRATED_MCU_ID, miscalibrated_signals, warm_up_c
 from device.emulator.imu_errors import IMU_GRADES, corrupt
 from device.emulator.pty_server import PtyShoeServer
+from device.emulator.scripts import BaroScript, TofScript, baro_from_height
+from device.emulator.tof_sensors import TofSensorModel, tof_readings
 from device.raw_imu import DUAL_IMU_MASK
 from device.unit import RawImuMode
 from pipeline.dual_imu_eskf import DualEskfConfig
@@ -101,6 +105,11 @@ class DemoOptions:
     board_lever_b_m: tuple[float, float, float] | None = None
     """Where the emulated board really has IMU 2, m; None: ``lever_b_m`` (a different one is a
     board mounted differently: the lever-arm check reports it)."""
+    stance: str = "inertial"
+    """Stance detector mode with ToF units: inertial, height, and, or (``pipeline.height_detector``)."""
+    tof: bool = False
+    """Emulate the multi-sensor unit: three ToF sensors and a barometer (extension states 0xE1/0xE2),
+    fused by the navigator (``pipeline.tof_aiding``)."""
 
 
 @dataclass(frozen=True)
@@ -167,6 +176,15 @@ def dual_demo_truth(opts: DemoOptions) -> tuple[GaitTruth, NDArray[np.float64], 
     return truth, acc, gyr
 
 
+def demo_extensions(opts: DemoOptions, truth: GaitTruth, foot_index: int) -> tuple[TofScript | None, BaroScript | None]:
+    """The ToF and barometer readings of one emulated foot (none unless ``opts.tof``)."""
+    if not opts.tof:
+        return None, None
+    sensors = TofSensorModel(seed=opts.seed + foot_index)
+    tof = tof_readings(truth.t_s, truth.pos_n_m, truth.quat_nb_wxyz, floor_of(opts.path), sensors)
+    return tof, baro_from_height(truth.t_s, truth.pos_n_m[:, 2])
+
+
 def run_demo(opts: DemoOptions) -> int:
     """Run the demo; returns the process exit code."""
     if opts.path not in PATHS:
@@ -222,9 +240,10 @@ def run_demo(opts: DemoOptions) -> int:
         ]
     else:
         mcu_id = MISCALIBRATED_MCU_ID if opts.miscalibrated else None
+        ext = [demo_extensions(opts, t, k) for k, (t, _, _) in enumerate(truths)]
         servers = [
-            PtyShoeServer(t.t_s, acc, gyr, speed=opts.realtime, record=False, mcu_id=mcu_id)
-            for t, acc, gyr in truths
+            PtyShoeServer(t.t_s, acc, gyr, speed=opts.realtime, record=False, mcu_id=mcu_id, tof=tof, baro=baro)
+            for (t, acc, gyr), (tof, baro) in zip(truths, ext, strict=True)
         ]
     extra = {"command": "footnav demo", "emulator": f"{opts.path} {opts.grade}"}
     capture = open_capture(cfg, session_id, enabled=opts.capture, extra=extra)
@@ -240,7 +259,7 @@ def run_demo(opts: DemoOptions) -> int:
             server.port,
             DualNavigator(dual_config, rate_hz=truth.rate_hz)
             if opts.dual_imu
-            else Navigator(nav_config, rate_hz=truth.rate_hz),
+            else Navigator(nav_config, rate_hz=truth.rate_hz, tof=tof_config(opts.stance)),
         )
         for foot, server in zip(feet, servers, strict=True)
     ]
@@ -254,7 +273,9 @@ def run_demo(opts: DemoOptions) -> int:
         if views is not None and isinstance(run.navigator, DualNavigator):
             run.sinks.append(dual_view_sink(run.navigator, views, run.foot))
         if capture is not None:
-            run.tap = capture.add_unit(unit_header(run.foot, run.port, "pty (emulator)", cfg, 0))
+            run.tap = capture.add_unit(
+                unit_header(run.foot, run.port, "pty (emulator)", cfg, 0, extensions=opts.tof, stance=opts.stance)
+            )
     server_of = dict(zip(feet, servers, strict=True))
 
     async def session(run: FootRun) -> None:
@@ -272,6 +293,7 @@ def run_demo(opts: DemoOptions) -> int:
             on_link_event=link_reporter(run, views, capture, two_feet=two),
             calibration=None if opts.dual_imu else calibration_lookup(cfg, run.foot, capture, views, two_feet=two),
             mode=RawImuMode(imu_mask=DUAL_IMU_MASK) if opts.dual_imu else None,
+            extensions=opts.tof and not opts.dual_imu,
         )
 
     interrupted = False
@@ -303,6 +325,10 @@ def run_demo(opts: DemoOptions) -> int:
         if isinstance(run.navigator, DualNavigator):
             for line in dual_summary_lines(run.navigator, truths[0][1], truths[0][2], lever):
                 print(prefix + line)
+        if opts.tof and isinstance(run.navigator, Navigator):
+            counts = run.navigator.tof.counts.by_reason
+            listed = ", ".join(f"{k} {v}" for k, v in sorted(counts.items(), key=lambda kv: -kv[1]))
+            print(f"{prefix}ToF readings: {listed or 'none received'}")
     return code
 
 

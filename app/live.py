@@ -21,7 +21,7 @@ from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -34,9 +34,11 @@ from device.links import LinkEvent, LinkGap, ReconnectingLink
 from device.unit import OpenShoeUnit
 from pipeline.dual_navigator import DualNavigator
 from pipeline.errors import DeviceError, FootnavError
+from pipeline.height_detector import HEIGHT_MODES, HeightDetectorParams, HeightMode
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import Navigator
 from pipeline.runner import NavSink
+from pipeline.tof_aiding import TofConfig
 from views.outputs import SessionViews, open_session_views
 
 if TYPE_CHECKING:
@@ -91,7 +93,18 @@ def open_capture(config: Config, session_id: str, *, enabled: bool, extra: dict[
     return writer
 
 
-def unit_header(foot: str, port: str, transport: str, config: Config, rate_divider_log2: int) -> UnitHeader:
+def unit_header(
+    foot: str,
+    port: str,
+    transport: str,
+    config: Config,
+    rate_divider_log2: int,
+    *,
+    extensions: bool = False,
+    stance: str = "inertial",
+) -> UnitHeader:
+    """The capture header of one unit; ``extensions``: the ToF and barometer states were switched on
+    (a replay then repeats that handshake); ``stance``: the ToF units' stance detector mode."""
     return UnitHeader(
         foot=foot,
         unit=UNIT_KIND,
@@ -103,12 +116,21 @@ def unit_header(foot: str, port: str, transport: str, config: Config, rate_divid
             "rate_divider_log2": rate_divider_log2,
             "rate_hz": BASE_RATE_HZ / 2**rate_divider_log2,
             "nav_config": config.to_json(),
+            "extensions": extensions,
+            "stance": stance,
         },
         calibration={
             "on_unit": "factory calibration applied by the unit (calibrated output 0x40)",
             "profile": config["unit.profile"],
         },
     )
+
+
+def tof_config(stance: str) -> TofConfig:
+    """ToF aiding settings with the stance detector mode ``stance`` (inertial, height, and, or)."""
+    if stance not in HEIGHT_MODES:
+        raise ValueError(f"unknown stance detector {stance!r}; expected one of {', '.join(HEIGHT_MODES)}")
+    return TofConfig(detector=HeightDetectorParams(mode=cast(HeightMode, stance)))
 
 
 @dataclass
@@ -302,6 +324,8 @@ class LiveOptions:
         ble_backend: tests only (never set by the command line): the bleak backend for BLE units, e.g.
             ``device.emulator.ble_backend.bumble_backend(adapter)``; None = the platform's.
         collect: tests only: an extra NavSink per foot (given the foot name).
+        tof: switch on the units' ToF and barometer extension states and fuse the ToF readings.
+        stance: stance detector mode with ToF units (``pipeline.height_detector.HeightDetectorParams``).
     """
 
     ports: dict[str, str]
@@ -313,6 +337,8 @@ class LiveOptions:
     argv: tuple[str, ...] = ()
     ble_backend: BleBackend | None = None
     collect: Callable[[str], NavSink] | None = None
+    tof: bool = False
+    stance: str = "inertial"
 
 
 def run_live(opts: LiveOptions) -> int:
@@ -351,7 +377,7 @@ async def live_session(opts: LiveOptions) -> int:
         FootRun(
             foot,
             str(addresses[foot]),
-            Navigator(nav_config, rate_hz=BASE_RATE_HZ / 2 ** dividers[foot]),
+            Navigator(nav_config, rate_hz=BASE_RATE_HZ / 2 ** dividers[foot], tof=tof_config(opts.stance)),
             rate_divider_log2=dividers[foot],
         )
         for foot in feet
@@ -362,7 +388,11 @@ async def live_session(opts: LiveOptions) -> int:
             run.sinks.append(opts.collect(run.foot))
         if capture is not None:
             transport = addresses[run.foot].transport
-            run.tap = capture.add_unit(unit_header(run.foot, run.port, transport, cfg, run.rate_divider_log2))
+            run.tap = capture.add_unit(
+                unit_header(
+                    run.foot, run.port, transport, cfg, run.rate_divider_log2, extensions=opts.tof, stance=opts.stance
+                )
+            )
 
     async def session(run: FootRun) -> None:
         await run_device_session(
@@ -377,6 +407,7 @@ async def live_session(opts: LiveOptions) -> int:
             on_link_event=link_reporter(run, views, capture, two_feet=two_feet),
             ble_backend=opts.ble_backend,
             calibration=calibration_lookup(cfg, run.foot, capture, views, two_feet=two_feet),
+            extensions=opts.tof,
         )
 
     if views is not None:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from app.calibration_store import StoredCalibration, calibration_dir, load_calibration
 from app.config import Config, apply_capture_settings
-from app.live import FootRun, foot_sinks, notice
+from app.live import FootRun, foot_sinks, notice, tof_config
 from app.session import CalibrationLookup, run_unit_session
 from app.status import Progress, StatusLine
 from device.capture import EXPECTED, CaptureReplayLink, summarize_capture
@@ -72,6 +72,9 @@ class ReplayOptions:
         start_s, end_s: window in session seconds (device time since the first sample, the
             recording's ``imu_time``), exact to the sample.
         collect: tests: an extra NavSink per foot.
+        tof: pass the unit's ToF readings to the navigator (False: the same capture navigated
+            inertial-only, to measure what the ToF sensors add).
+        stance: stance detector mode with ToF units (None: as recorded in the capture).
     """
 
     path: Path
@@ -84,6 +87,8 @@ class ReplayOptions:
     web: bool = False
     config_is_explicit: bool = False
     collect: Callable[[str], NavSink] | None = None
+    tof: bool = True
+    stance: str | None = None
 
 
 def run_replay(opts: ReplayOptions) -> int:
@@ -146,7 +151,9 @@ def run_replay(opts: ReplayOptions) -> int:
     runs: list[FootRun] = []
     links: dict[str, CaptureReplayLink] = {}
     for k, foot in enumerate(feet):
-        run = FootRun(foot, opts.path.name, Navigator(nav_config, rate_hz=rate_of.get(foot, 1000.0)))
+        recorded = info.units[feet.index(foot)].settings.get("stance", "inertial")
+        tof = tof_config(opts.stance or str(recorded))
+        run = FootRun(foot, opts.path.name, Navigator(nav_config, rate_hz=rate_of.get(foot, 1000.0), tof=tof))
         foot_sinks(run, views, status, two_feet=len(feet) > 1, put_timeout_s=0.0 if realtime else REPLAY_PUT_TIMEOUT_S)
         if opts.collect is not None:
             run.sinks.append(opts.collect(foot))
@@ -187,7 +194,8 @@ def run_replay(opts: ReplayOptions) -> int:
         if run.health is not None:
             run.health.stats = lambda: unit.stats
         expect = ends.get(run.foot)
-        rate_divider = int(info.units[feet.index(run.foot)].settings.get("rate_divider_log2", 0))
+        settings = info.units[feet.index(run.foot)].settings
+        rate_divider = int(settings.get("rate_divider_log2", 0))
         await run_unit_session(
             unit,
             run.navigator,
@@ -202,6 +210,8 @@ def run_replay(opts: ReplayOptions) -> int:
             window=(opts.start_s, opts.end_s) if windowed else None,
             on_window=lambda: setattr(link, "paced", True),
             calibration=lookup(run.foot),
+            extensions=bool(settings.get("extensions", False)),
+            use_ranges=opts.tof,
         )
 
     from app.live import run_feet

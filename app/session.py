@@ -21,14 +21,17 @@ import numpy as np
 
 from app.status import FootStatus, StatusLine
 from device import links
+from device.extensions import BaroBatch, TofBatch
 from device.links import LinkEvent, ReconnectingLink
 from device.raw_imu import RawImuBatch
 from device.unit import CaptureTap, LinkStats, Mode, OpenShoeUnit, RawImuMode
+from pipeline.baro import PressureBatch
 from pipeline.calibration import CalibrationError, ImuCalibration
 from pipeline.errors import DeviceError
 from pipeline.nav_types import NavBatch
-from pipeline.runner import BatchNavigator, NavSink, run_pipeline
+from pipeline.runner import BatchNavigator, NavSink, SourceItem, run_pipeline
 from pipeline.samples import ImuBatch
+from pipeline.tof_aiding import RangeBatch
 
 if TYPE_CHECKING:
     from app.calibration_store import StoredCalibration
@@ -203,6 +206,17 @@ async def _raw_batches(unit: OpenShoeUnit) -> AsyncGenerator[RawImuBatch, None]:
                 yield batch
 
 
+def _readings(batch: TofBatch | BaroBatch, t0_s: float, window: tuple[float, float] | None) -> SourceItem | None:
+    """A ToF or barometer batch as the pipeline's readings, on the session clock (None: none left)."""
+    t_s = batch.t_s - t0_s
+    keep = np.ones(t_s.shape, dtype=bool) if window is None else (t_s >= window[0]) & (t_s <= window[1])
+    if not keep.any():
+        return None
+    if isinstance(batch, TofBatch):
+        return RangeBatch(t_s[keep], batch.sensor[keep], batch.range_m[keep], batch.status[keep])
+    return PressureBatch(t_s[keep], batch.pressure_pa[keep])
+
+
 async def _session_samples(
     unit: OpenShoeUnit,
     result: SerialSessionResult,
@@ -213,18 +227,22 @@ async def _session_samples(
     idle_notice_s: float | None = IDLE_NOTICE_S,
     window: tuple[float, float] | None = None,
     on_window: Callable[[], None] | None = None,
+    use_ranges: bool = True,
     raw: bool = False,
 ) -> AsyncIterator[Any]:
-    """The unit's batches (``ImuBatch``, or ``RawImuBatch`` with ``raw``: the multi-IMU output
-    0x28 of e.g. the dual-IMU board) with time rebased to the session's first sample; ends after
-    ``expect_samples`` or when ``source_done()`` and the link has gone quiet.
+    """The unit's IMU batches (and ToF and barometer readings, when the unit sends them; or, with
+    ``raw``, the ``RawImuBatch`` es of the multi-IMU output 0x28 of e.g. the dual-IMU board) with time
+    rebased to the session's first sample; ends after ``expect_samples`` IMU samples or when
+    ``source_done()`` and the link has gone quiet.
 
     ``host_clock`` maps the driver's host stamp of a batch to another (a replay's captured time).
     ``window = (start, end)`` in session seconds: samples outside it are decoded but not
-    passed on (``on_window()`` is called at the first one passed on), the stream ends after ``end``."""
+    passed on (``on_window()`` is called at the first one passed on), the stream ends after ``end``.
+    Readings before the first IMU sample (no session clock yet) are dropped; ToF readings are dropped
+    when not ``use_ranges``."""
     in_window = window is None
     received = 0
-    batches = cast(AsyncGenerator[Any, None], _raw_batches(unit) if raw else unit.imu_batches())
+    batches = cast(AsyncGenerator[Any, None], _raw_batches(unit) if raw else _imu_and_readings(unit))
     # The pending anext survives idle timeouts: cancelling it (asyncio.wait_for) would end the generator.
     pending: asyncio.Future[Any] | None = None
     async with contextlib.aclosing(batches):
@@ -249,6 +267,14 @@ async def _session_samples(
                         batch = fut.result()
                     except StopAsyncIteration:
                         return
+                if isinstance(batch, TofBatch | BaroBatch):
+                    if isinstance(batch, TofBatch) and not use_ranges:
+                        continue
+                    if result.device_t0_s is not None and (window is None or in_window):
+                        item = _readings(batch, result.device_t0_s, window)
+                        if item is not None:
+                            yield item
+                    continue
                 if host_clock is not None:
                     host = host_clock(int(batch.host_ns[0]))
                     batch = dataclasses.replace(batch, host_ns=np.full(len(batch), host, dtype=np.int64))
@@ -282,10 +308,19 @@ async def _session_samples(
                     await pending
 
 
-async def _corrected(samples: AsyncIterator[ImuBatch], calibration: ImuCalibration) -> AsyncIterator[ImuBatch]:
-    """The calibration stage before the navigator: every batch corrected (no temperature in the stream)."""
-    async for batch in samples:
-        yield calibration.correct(batch)
+async def _corrected(samples: AsyncIterator[Any], calibration: ImuCalibration) -> AsyncIterator[Any]:
+    """The calibration stage before the navigator: every IMU batch corrected (no temperature in the
+    stream); other readings pass through."""
+    async for item in samples:
+        yield calibration.correct(item) if isinstance(item, ImuBatch) else item
+
+
+async def _imu_and_readings(unit: OpenShoeUnit) -> AsyncGenerator[ImuBatch | TofBatch | BaroBatch, None]:
+    """The IMU, ToF and barometer batches of :meth:`OpenShoeUnit.batches`, in arrival order."""
+    async with contextlib.aclosing(unit.batches()) as stream:
+        async for batch in stream:
+            if isinstance(batch, ImuBatch | TofBatch | BaroBatch):
+                yield batch
 
 
 async def run_serial_session(
@@ -304,6 +339,7 @@ async def run_serial_session(
     on_link_event: Callable[[LinkEvent], None] | None = None,
     calibration: CalibrationLookup | None = None,
     mode: Mode | None = None,
+    extensions: bool = False,
 ) -> SerialSessionResult:
     """:func:`run_device_session` on the serial port ``port``."""
     return await run_device_session(
@@ -321,6 +357,7 @@ async def run_serial_session(
         on_link_event=on_link_event,
         calibration=calibration,
         mode=mode,
+        extensions=extensions,
     )
 
 
@@ -341,6 +378,7 @@ async def run_device_session(
     ble_backend: BleBackend | None = None,
     calibration: CalibrationLookup | None = None,
     mode: Mode | None = None,
+    extensions: bool = False,
 ) -> SerialSessionResult:
     """Open the unit at ``address`` through a :class:`~device.links.ReconnectingLink`, start its IMU
     stream, navigate until the stream ends or the task is cancelled (Ctrl-C), then stop the unit and
@@ -358,7 +396,9 @@ async def run_device_session(
     ``calibration``: look the unit's calibration file up by its MCU id and apply it (see
     :class:`CalibrationLookup`);
     ``mode``: the output mode to start (None: the calibrated-IMU stream at ``rate_divider_log2``);
-    ``RawImuMode`` streams ``RawImuBatch`` es (e.g. the dual-IMU board) to a matching navigator.
+    ``RawImuMode`` streams ``RawImuBatch`` es (e.g. the dual-IMU board) to a matching navigator;
+    ``extensions``: also switch on the unit's ToF and barometer states (footnav's extension states
+    0xE1/0xE2); their readings go to the navigator.
 
     Raises:
         DeviceError: the port does not exist or is busy, no Bluetooth stack, the unit is not found or
@@ -380,6 +420,7 @@ async def run_device_session(
         result=result,
         calibration=calibration,
         mode=mode,
+        extensions=extensions,
     )
 
 
@@ -401,12 +442,16 @@ async def run_unit_session(
     on_window: Callable[[], None] | None = None,
     calibration: CalibrationLookup | None = None,
     mode: Mode | None = None,
+    extensions: bool = False,
+    use_ranges: bool = True,
 ) -> SerialSessionResult:
     """Navigate an open unit's stream (see :func:`run_serial_session`); ``start=False`` for a replay,
     where the captured bytes already hold the start and no stop is sent; ``idle_notice_s=None`` never
     treats a pause as idle (replays); ``window``: see ``_session_samples``; ``calibration``: ask the
     unit its MCU id before the start and apply its calibration file (a replay passes one only when the
-    capture holds that exchange). Closes the unit."""
+    capture holds that exchange); ``mode``: the output mode (see :func:`run_device_session`);
+    ``extensions``: switch the ToF and barometer states on after the start; ``use_ranges=False``
+    leaves the ToF readings out of the navigation. Closes the unit."""
     result = result if result is not None else SerialSessionResult()
     name = unit.link.name
 
@@ -435,6 +480,8 @@ async def run_unit_session(
                 await unit.start_imu_stream(rate_divider_log2)
             else:
                 await unit.start(mode)
+            if extensions:
+                await unit.enable_extensions(tof=True, baro=True)
         samples = _session_samples(
             unit,
             result,
@@ -445,10 +492,11 @@ async def run_unit_session(
             idle_notice_s,
             window,
             on_window,
+            use_ranges,
             raw=isinstance(mode, RawImuMode),
         )
         if stored is not None and mode is None:
-            samples = _corrected(cast(AsyncIterator[ImuBatch], samples), stored.calibration)
+            samples = _corrected(samples, stored.calibration)
         await run_pipeline(samples, navigator, [*sinks, keep_last])
     finally:
         result.link = unit.stats

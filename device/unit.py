@@ -746,15 +746,20 @@ class OpenShoeUnit:
             )
             if step_batch is not None:
                 out.append(step_batch)
+        # Extension readings first: a host that navigates the IMU batch of this read then already
+        # holds the readings taken during its samples (the firmware sends each after the IMU sample
+        # of its time, so only a read boundary between the two makes a reading late).
+        ext: list[Batch] = []
         if d.tof and t_tof is not None:
             tarr = extensions.decode_tof(b"".join(pl for _, pl in d.tof))
-            out.append(
+            ext.append(
                 TofBatch(t_tof, tarr.sensor, tarr.range_m, tarr.status, counter_of(d.tof), host(len(d.tof)))
             )
         if d.baro and t_baro is not None:
             barr = extensions.decode_baro(b"".join(pl for _, pl in d.baro))
             m = len(d.baro)
-            out.append(BaroBatch(t_baro, barr.pressure_pa, barr.temperature_c, counter_of(d.baro), host(m)))
+            ext.append(BaroBatch(t_baro, barr.pressure_pa, barr.temperature_c, counter_of(d.baro), host(m)))
+        out = ext + out
         self._samples += sum(len(b) for b in out)
         return out
 

@@ -3,9 +3,15 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from pipeline.baro import PressureAltitude
+    from pipeline.clearance import StrideClearance
+    from pipeline.tof_aiding import RangeOutputs
 
 F64 = NDArray[np.float64]
 
@@ -25,10 +31,15 @@ class NavBatch:
         stance: (n,) True where the zero-velocity detector declared the foot still.
         detector_stat: (n,) the detector's test statistic (dimensionless).
         detector_threshold: (n,) the threshold in force at each sample (it adapts to the gait).
-        clearance_m: (n,) height of the IMU above the floor the walk started on, m.
+        clearance_m: (n,) height of the IMU above the floor under it, m: above ``floor_z_m`` when the
+            ToF sensors give it, else above the floor the walk started on (z = 0).
         host_ns: (n,) host receive time of each sample (latency accounting).
         cov_pos_yaw: (n, 4, 4) covariance of (x, y, z, ψ) when the estimator provides it (steps,
             heading uncertainty); ``pos_cov_n_m2`` is its upper-left block.
+        floor_z_m: (n,) estimated height of the floor under the IMU (ToF units), else None.
+        ranges: the ToF readings handled with these samples and what became of each, else None.
+        strides: per-stride clearance of the swings that ended in these samples, else None.
+        altitude: barometer pressure altitude of the readings received since the last batch, else None.
     """
 
     t_s: F64
@@ -42,6 +53,10 @@ class NavBatch:
     clearance_m: F64
     host_ns: NDArray[np.int64]
     cov_pos_yaw: F64 | None = None
+    floor_z_m: F64 | None = None
+    ranges: RangeOutputs | None = None
+    strides: StrideClearance | None = None
+    altitude: PressureAltitude | None = None
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])

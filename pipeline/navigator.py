@@ -18,10 +18,14 @@ from numpy.typing import NDArray
 
 from pipeline import eskf
 from pipeline.alignment import align_from_still
+from pipeline.baro import PressureAltimeter, PressureAltitude, PressureBatch
+from pipeline.clearance import StrideClearance, StrideClearanceTracker
 from pipeline.detectors import DetectorParams, StreamingDetector
+from pipeline.height_detector import HeightStanceDetector
 from pipeline.nav_types import NavBatch
 from pipeline.profiles import UnitProfile, get_profile
 from pipeline.samples import ImuBatch
+from pipeline.tof_aiding import RangeBatch, RangeOutputs, TofAiding, TofConfig
 
 F64 = NDArray[np.float64]
 
@@ -105,14 +109,33 @@ def filter_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float,
 class Navigator:
     """Causal zero-velocity-aided INS over a stream of ``ImuBatch``es.
 
+    ToF range readings (:meth:`add_ranges`) are applied between IMU samples: the batch is split at
+    each reading's time, the filter runs up to the last sample not after it, the reading updates the
+    state (``pipeline.tof_aiding``), and the filter goes on. A reading older than the last sample
+    already navigated (it arrived in a later read than that sample) is applied before the next
+    sample and counted as ``late``. Without readings the batch runs in one call, as fast as before.
+
     Args:
         config: filter, detector and profile settings.
         rate_hz: nominal sample rate (sizes the detector window and the process noise).
+        tof: ToF sensor mounting and aiding settings (default :class:`TofConfig`).
     """
 
-    def __init__(self, config: NavConfig, rate_hz: float) -> None:
+    def __init__(self, config: NavConfig, rate_hz: float, tof: TofConfig | None = None) -> None:
         self.config = config
         self.rate_hz = rate_hz
+        self.tof = TofAiding(tof or TofConfig())
+        tof_cfg = self.tof.config
+        self.height_detector = (
+            None
+            if tof_cfg.detector.mode == "inertial"
+            else HeightStanceDetector(
+                tof_cfg.detector, np.asarray(tof_cfg.lever_b_m), np.asarray(tof_cfg.dir_b), rate_hz
+            )
+        )
+        self.altimeter = PressureAltimeter()
+        self._altitude: list[PressureAltitude] = []
+        self._strides = StrideClearanceTracker()
         self.detector = StreamingDetector(config.detector, rate_hz)
         self.stats = NavStats()
         self._pending: list[tuple[ImuBatch, F64, F64, NDArray[np.bool_]]] = []
@@ -131,12 +154,29 @@ class Navigator:
         """Nominal state (16,) [p, v, q_wxyz, b_a, b_g], or None before alignment."""
         return None if self._x is None else self._x.copy()
 
+    def add_ranges(self, readings: RangeBatch) -> None:
+        """Queue ToF readings; each is applied when the IMU samples reach its time (and, with a
+        height-aided detector, gives the foot's height to the stance detection)."""
+        self.tof.add(readings)
+        if self.height_detector is not None and len(readings):
+            order = np.argsort(readings.t_s, kind="stable")
+            r = readings.select(order)
+            self.height_detector.add(r.t_s, r.sensor, r.range_m, r.status)
+
+    def add_pressure(self, readings: PressureBatch) -> None:
+        """Barometer readings: converted to pressure altitude and passed on with the next estimates
+        (shown, not used in estimation: see ``pipeline.baro``)."""
+        if len(readings):
+            self._altitude.append(self.altimeter.update(readings))
+
     def process(self, batch: ImuBatch) -> NavBatch | None:
         """Estimates for the samples of ``batch`` (and any buffered before alignment)."""
         if len(batch) == 0:
             return None
         self.stats.samples_in += len(batch)
         stat, threshold, still = self.detector.update(batch.acc_b_mps2, batch.gyr_b_radps)
+        if self.height_detector is not None:
+            still = self.height_detector.update(batch.t_s, batch.acc_b_mps2, batch.gyr_b_radps, still)
         if self._x is None:
             self._pending.append((batch, stat, threshold, still))
             return self._try_align()
@@ -185,6 +225,7 @@ class Navigator:
         self.stats.aligned_at_s = float(batch.t_s[start])
         self._t_last = float(batch.t_s[start]) - 1.0 / self.rate_hz  # one nominal interval before
         rest = batch.select(slice(start, None))
+        self.tof.drop_before(float(batch.t_s[start]))
         return self._run(rest, stat[start:], threshold[start:], still[start:])
 
     def _quiet(self, batch: ImuBatch) -> NDArray[np.bool_]:
@@ -211,27 +252,85 @@ class Navigator:
         self._t_last = float(batch.t_s[-1])
         pos, vel = np.empty((n, 3)), np.empty((n, 3))
         quat, cov = np.empty((n, 4)), np.empty((n, 4, 4))
-        eskf.run_filter(
-            self._x,
-            self._P,
-            np.ascontiguousarray(batch.acc_b_mps2, dtype=np.float64),
-            np.ascontiguousarray(batch.gyr_b_radps, dtype=np.float64),
-            dt,
-            np.ascontiguousarray(still),
-            self._par,
-            pos,
-            vel,
-            quat,
-            cov,
-            self._counters,
-        )
+        acc = np.ascontiguousarray(batch.acc_b_mps2, dtype=np.float64)
+        gyr = np.ascontiguousarray(batch.gyr_b_radps, dtype=np.float64)
+        still_c = np.ascontiguousarray(still)
+        floor_z: F64 | None = None
+        ranges: RangeOutputs | None = None
+        if not self.tof.active:
+            eskf.run_filter(self._x, self._P, acc, gyr, dt, still_c, self._par, pos, vel, quat, cov, self._counters)
+        else:
+            floor_z, ranges = self._run_with_ranges(batch, acc, gyr, dt, still_c, pos, vel, quat, cov)
         c = self._counters
         s = self.stats
         s.bad_dt, s.gaps = int(c[eskf.CNT_BAD_DT]), int(c[eskf.CNT_GAP])
         s.bad_samples, s.zero_velocity_updates = int(c[eskf.CNT_BAD_SAMPLE]), int(c[eskf.CNT_UPDATES])
         s.zero_rate_updates, s.zero_rate_rejected = int(c[eskf.CNT_ZARU]), int(c[eskf.CNT_ZARU_REJECTED])
         s.samples_out += n
-        return nav_batch(batch, pos, vel, quat, cov, stat, threshold, still)
+        clearance = pos[:, 2].copy() if floor_z is None else pos[:, 2] - floor_z
+        strides = self._strides.update(batch.t_s, clearance, still)
+        altitude = None
+        if self._altitude:
+            altitude = PressureAltitude(
+                np.concatenate([a.t_s for a in self._altitude]), np.concatenate([a.altitude_m for a in self._altitude])
+            )
+            self._altitude = []
+        return nav_batch(
+            batch,
+            pos,
+            vel,
+            quat,
+            cov,
+            stat,
+            threshold,
+            still,
+            floor_z_m=floor_z,
+            ranges=ranges,
+            clearance_m=clearance,
+            strides=strides,
+            altitude=altitude,
+        )
+
+    def _run_with_ranges(
+        self,
+        batch: ImuBatch,
+        acc: F64,
+        gyr: F64,
+        dt: F64,
+        still: NDArray[np.bool_],
+        pos: F64,
+        vel: F64,
+        quat: F64,
+        cov: F64,
+    ) -> tuple[F64, RangeOutputs]:
+        """The filter over ``batch`` with the due ToF readings applied at their times (class docstring);
+        returns the floor height under the IMU per sample and what became of each reading."""
+        assert self._x is not None
+        x, P, par, cnt = self._x, self._P, self._par, self._counters
+        n = len(batch)
+        due = self.tof.take_due(float(batch.t_s[-1]))
+        m = len(due)
+        # reading j is applied after sample at[j] (the last one not after it); -1: before sample 0
+        at = np.searchsorted(batch.t_s, due.t_s, side="right") - 1
+        self.tof.counts.add("late", int(np.count_nonzero(at < 0)))
+        heights, codes, innov, floors = np.full(m, np.nan), np.zeros(m, np.int64), np.full(m, np.nan), np.zeros(m)
+        floor_z = np.empty(n)
+        a = 0
+        for j in range(m + 1):
+            b = n if j == m else int(at[j]) + 1
+            if b > a:
+                eskf.run_filter(
+                    x, P, acc[a:b], gyr[a:b], dt[a:b], still[a:b], par, pos[a:b], vel[a:b], quat[a:b], cov[a:b], cnt
+                )
+                floor_z[a:b] = self.tof.floor_under(pos[a:b])
+                a = b
+            if j < m:
+                stance = bool(still[max(a - 1, 0)])
+                codes[j], heights[j], innov[j] = self.tof.apply(
+                    x, P, float(due.t_s[j]), int(due.sensor[j]), float(due.range_m[j]), int(due.status[j]), stance
+                )
+                floors[j] = self.tof.floor_z_m
+        return floor_z, RangeOutputs(due.t_s, due.sensor, due.status, heights, codes, innov, floors)
 
 
 def nav_batch(
@@ -243,8 +342,20 @@ def nav_batch(
     stat: F64,
     threshold: F64,
     still: NDArray[np.bool_],
+    *,
+    floor_z_m: F64 | None = None,
+    ranges: RangeOutputs | None = None,
+    clearance_m: F64 | None = None,
+    strides: StrideClearance | None = None,
+    altitude: PressureAltitude | None = None,
 ) -> NavBatch:
-    """The :class:`NavBatch` of ``batch``'s samples from the filter's per-sample outputs."""
+    """The :class:`NavBatch` of ``batch``'s samples from the filter's per-sample outputs.
+
+    Clearance is the height above ``floor_z_m`` (n,) when the floor under the IMU is known (ToF),
+    else above the floor the walk started on (z = 0), unless given as ``clearance_m``.
+    """
+    if clearance_m is None:
+        clearance_m = pos[:, 2].copy() if floor_z_m is None else pos[:, 2] - floor_z_m
     return NavBatch(
         t_s=batch.t_s,
         pos_n_m=pos,
@@ -254,9 +365,13 @@ def nav_batch(
         stance=still,
         detector_stat=stat,
         detector_threshold=threshold,
-        clearance_m=pos[:, 2].copy(),
+        clearance_m=clearance_m,
         host_ns=batch.host_ns,
         cov_pos_yaw=cov_pos_yaw,
+        floor_z_m=floor_z_m,
+        ranges=ranges,
+        strides=strides,
+        altitude=altitude,
     )
 
 
@@ -273,10 +388,20 @@ def _first_run(mask: NDArray[np.bool_], length: int) -> int:
 
 
 def navigate(
-    t_s: F64, acc_b_mps2: F64, gyr_b_radps: F64, rate_hz: float, config: NavConfig | None = None
+    t_s: F64,
+    acc_b_mps2: F64,
+    gyr_b_radps: F64,
+    rate_hz: float,
+    config: NavConfig | None = None,
+    *,
+    ranges: RangeBatch | None = None,
+    tof: TofConfig | None = None,
 ) -> tuple[NavBatch | None, NavStats]:
-    """Run the causal navigator over whole arrays (tests, export, evaluation)."""
-    nav = Navigator(config or NavConfig(), rate_hz)
+    """Run the causal navigator over whole arrays (tests, export, evaluation), with ToF ``ranges``
+    when given."""
+    nav = Navigator(config or NavConfig(), rate_hz, tof=tof)
+    if ranges is not None:
+        nav.add_ranges(ranges)
     n = t_s.shape[0]
     out = nav.process(
         ImuBatch(t_s, acc_b_mps2, gyr_b_radps, np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64))

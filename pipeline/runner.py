@@ -2,6 +2,10 @@
 
     source ──▶ [queue] ──▶ navigator ──▶ sinks (callables, each must return quickly)
 
+The source yields IMU sample batches and, from units that have them, ToF range and barometer
+readings, in the order they arrived; readings are queued in the navigator, which applies them when
+its IMU samples reach their time (``Navigator.add_ranges``, ``add_pressure``).
+
 The queue is bounded, so a slow estimator pushes back on the source (the OS and the unit buffer the
 bytes; the capture, written by the source, never drops anything). Sinks must not block: the Rerun
 logger, for example, only enqueues for its own thread. This is the only module of ``pipeline`` that
@@ -12,11 +16,16 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import AsyncIterator, Callable, Sequence
-from typing import Protocol, TypeVar
+from typing import Any, Protocol, TypeVar, cast
 
+from pipeline.baro import PressureBatch
 from pipeline.nav_types import NavBatch
+from pipeline.samples import ImuBatch
+from pipeline.tof_aiding import RangeBatch
 
 NavSink = Callable[[NavBatch], object]  # return values are ignored
+SourceItem = ImuBatch | RangeBatch | PressureBatch
+"""What a single-IMU source yields (a dual-IMU source yields two-IMU batches only)."""
 
 BatchT_contra = TypeVar("BatchT_contra", contravariant=True)
 B = TypeVar("B")
@@ -31,8 +40,16 @@ class BatchNavigator(Protocol[BatchT_contra]):
         ...
 
 
+class AidedNavigator(Protocol):
+    """A navigator that also takes ToF ranges and barometer readings (``pipeline.navigator.Navigator``)."""
+
+    def add_ranges(self, batch: RangeBatch) -> None: ...
+
+    def add_pressure(self, batch: PressureBatch) -> None: ...
+
+
 async def run_pipeline(
-    source: AsyncIterator[B],
+    source: AsyncIterator[Any],
     navigator: BatchNavigator[B],
     sinks: Sequence[NavSink],
     queue_batches: int = 256,
@@ -41,7 +58,7 @@ async def run_pipeline(
 
     Raises whatever the source, navigator or a sink raised (the other stage is cancelled).
     """
-    queue: asyncio.Queue[B | None] = asyncio.Queue(maxsize=queue_batches)
+    queue: asyncio.Queue[Any] = asyncio.Queue(maxsize=queue_batches)
 
     async def produce() -> None:
         async for batch in source:
@@ -50,6 +67,12 @@ async def run_pipeline(
 
     async def estimate() -> None:
         while (batch := await queue.get()) is not None:
+            if isinstance(batch, RangeBatch):  # only sources of a navigator that takes them yield these
+                cast(AidedNavigator, navigator).add_ranges(batch)
+                continue
+            if isinstance(batch, PressureBatch):
+                cast(AidedNavigator, navigator).add_pressure(batch)
+                continue
             nav = navigator.process(batch)
             if nav is not None:
                 for sink in sinks:

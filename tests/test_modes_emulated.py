@@ -14,15 +14,16 @@ import numpy as np
 import pytest
 
 from device import extensions, protocol, raw_imu
+from device.emulator.floors import floor_of
 from device.emulator.gait import GaitTruth, simulate_walk
 from device.emulator.pty_server import BT_UART_BUDGET_BPS, PtyShoeServer
 from device.emulator.scripts import (
     InsTruth,
     baro_from_height,
     steps_from_truth,
-    tof_from_clearance,
     yaw_from_quat_wxyz,
 )
+from device.emulator.tof_sensors import tof_readings
 from device.extensions import BaroBatch, TofBatch
 from device.framer import DataPacket, DeviceAck, Framer
 from device.ins_states import InsStateBatch
@@ -210,8 +211,7 @@ async def test_ins_states_in_footnav_frame(walk: GaitTruth) -> None:
 
 
 async def test_extension_states_interleave_with_the_imu_stream(walk: GaitTruth) -> None:
-    clearance = walk.pos_n_m[:, 2] - walk.floor_z_m
-    tof = tof_from_clearance(walk.t_s, clearance)
+    tof = tof_readings(walk.t_s, walk.pos_n_m, walk.quat_nb_wxyz, floor_of("line"))
     baro = baro_from_height(walk.t_s, walk.pos_n_m[:, 2])
     with PtyShoeServer(
         walk.t_s, walk.acc_b_mps2, walk.gyr_b_radps, speed=math.inf, tof=tof, baro=baro
@@ -242,7 +242,7 @@ async def test_extension_states_interleave_with_the_imu_stream(walk: GaitTruth) 
 
 async def test_unknown_packets_are_counted_and_logged_once(caplog: pytest.LogCaptureFixture) -> None:
     t, acc, gyr, _, _ = synth(3000)
-    tof = tof_from_clearance(t, np.full(t.size, 0.1))
+    tof = tof_readings(t, np.zeros((t.size, 3)), np.tile([1.0, 0.0, 0.0, 0.0], (t.size, 1)), floor_of("line"))
     with PtyShoeServer(t, acc, gyr, speed=math.inf, tof=tof) as server:
         async with await OpenShoeUnit.open_serial(server.port) as unit:
             await unit.start(NormalImuMode())

@@ -52,6 +52,8 @@ LINE_RADIUS_M = 0.006
 SWING_RGB = (255, 140, 0)
 STANCE_RGB = (0, 160, 255)
 TRUTH_RGB = (150, 150, 150)
+TOF_RGB = ((0, 170, 120), (150, 90, 200), (200, 150, 0))
+"""Colours of the three ToF sensors' measured heights (toe, mid-foot, heel)."""
 COV_RGBA = (255, 200, 0, 110)
 FLOOR_RGBA = (110, 110, 110, 60)
 
@@ -132,6 +134,8 @@ def build_blueprint(
         rrb.Tabs(
             series("ZUPT detector (statistic, threshold)", "detector"),
             series("Position σ [m]", "pos_sigma", windowed=False),
+            series("ToF readings: used, gated, invalid", "tof_readings", windowed=False),
+            series("Pressure altitude [m]", "altitude", windowed=False),
         ),
         *[
             rrb.TimeSeriesView(
@@ -195,6 +199,28 @@ def static_setup(feet: Sequence[str] = ("foot",)) -> list[tuple[str, rr.AsCompon
             ),
             (p.clearance, rr.SeriesLines(names=f"{foot} clearance", colors=[rgb], widths=1.5)),
             (p.stance, rr.SeriesLines(names=f"{foot} stance", colors=[rgb], widths=1.5)),
+            *(
+                (p.tof_height(k), rr.SeriesPoints(names=f"{foot} ToF {k} height", colors=[c], marker_sizes=1.5))
+                for k, c in enumerate(TOF_RGB)
+            ),
+            (
+                p.stride_clearance,
+                rr.SeriesPoints(
+                    names=[f"{foot} stride min", f"{foot} stride max"],
+                    colors=[(0, 0, 0), (0, 0, 0)],
+                    markers=["down", "up"],
+                    marker_sizes=[5.0, 5.0],
+                ),
+            ),
+            (
+                p.tof_readings,
+                rr.SeriesLines(
+                    names=[f"{foot} used", f"{foot} gated", f"{foot} invalid status"],
+                    colors=[(60, 180, 75), (230, 80, 60), (120, 120, 120)],
+                    widths=1.5,
+                ),
+            ),
+            (p.altitude, rr.SeriesLines(names=f"{foot} pressure altitude", colors=[rgb], widths=1.5)),
             (
                 p.pos_sigma,
                 rr.SeriesLines(

@@ -8,14 +8,17 @@ one ``imu_time`` index. Quaternions are scalar-first (``wxyz``) everywhere in fo
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 import rerun as rr
 from numpy.typing import NDArray
 
 from pipeline.nav_types import NavBatch
+from pipeline.tof_update import USED as TOF_USED
 from views.paths import TIMELINE, FootPaths
 
 F32 = NDArray[np.float32]
@@ -109,6 +112,10 @@ def concat_batches(batches: Sequence[NavBatch]) -> NavBatch:
     if not batches:
         raise ValueError("concat_batches needs at least one NavBatch")
     return NavBatch(
+        floor_z_m=_concat_optional([b.floor_z_m for b in batches], [len(b) for b in batches]),
+        ranges=_concat_dataclasses([b.ranges for b in batches]),
+        strides=_concat_dataclasses([b.strides for b in batches]),
+        altitude=_concat_dataclasses([b.altitude for b in batches]),
         t_s=np.concatenate([b.t_s for b in batches]),
         pos_n_m=np.concatenate([b.pos_n_m for b in batches]),
         vel_n_mps=np.concatenate([b.vel_n_mps for b in batches]),
@@ -120,6 +127,28 @@ def concat_batches(batches: Sequence[NavBatch]) -> NavBatch:
         clearance_m=np.concatenate([b.clearance_m for b in batches]),
         host_ns=np.concatenate([b.host_ns for b in batches]),
     )
+
+
+def _concat_optional(parts: Sequence[F64 | None], lengths: Sequence[int]) -> F64 | None:
+    """Per-sample optional arrays joined; NaN where a batch had none (None if none had any)."""
+    if all(p is None for p in parts):
+        return None
+    return np.concatenate([np.full(n, np.nan) if p is None else p for p, n in zip(parts, lengths, strict=True)])
+
+
+_T = TypeVar("_T")
+
+
+def _concat_dataclasses(parts: Sequence[_T | None]) -> _T | None:
+    """Dataclasses of per-event arrays (ToF readings, strides, altitude) joined field by field."""
+    present = [p for p in parts if p is not None]
+    if not present:
+        return None
+    if len(present) == 1:
+        return present[0]
+    cls = type(present[0])
+    names = [f.name for f in dataclasses.fields(cls)]  # type: ignore[arg-type]
+    return cls(**{k: np.concatenate([getattr(p, k) for p in present]) for k in names})
 
 
 @dataclass(frozen=True, slots=True)
@@ -292,9 +321,43 @@ def nav_columns(
     return out
 
 
-def gait_columns(
-    t_s: F64, stance: NDArray[np.bool_], paths: FootPaths, *, previous: bool | None
-) -> SendColumns | None:
+def tof_columns(nav: NavBatch, paths: FootPaths, totals: NDArray[np.int64]) -> list[SendColumns]:
+    """ToF, stride and barometer columns of one batch (empty when it has none).
+
+    Each sensor's measured height per valid reading; per-stride ``[min, max]`` clearance; the
+    cumulative ``[used, gated, invalid status]`` reading counts (``totals`` (3,) is carried between
+    batches and updated in place); pressure altitude.
+    """
+    out: list[SendColumns] = []
+    r = nav.ranges
+    if r is not None and len(r):
+        valid = np.isfinite(r.height_m)
+        for k in np.unique(r.sensor[valid]).tolist():
+            sel = valid & (r.sensor == k)
+            out.append((paths.tof_height(int(k)), time_column(r.t_s[sel]), rr.Scalars.columns(scalars=r.height_m[sel])))
+        used = r.code == TOF_USED
+        invalid = r.status != 0
+        gated = ~used & ~invalid
+        counts = np.column_stack([used, gated, invalid]).astype(np.int64)
+        cum = np.cumsum(counts, axis=0) + totals
+        totals[:] = cum[-1]
+        out.append((paths.tof_readings, time_column(r.t_s), rr.Scalars.columns(scalars=cum.astype(np.float64))))
+    st = nav.strides
+    if st is not None and len(st):
+        out.append(
+            (
+                paths.stride_clearance,
+                time_column(st.t_s),
+                rr.Scalars.columns(scalars=np.column_stack([st.min_m, st.max_m])),
+            )
+        )
+    alt = nav.altitude
+    if alt is not None and len(alt):
+        out.append((paths.altitude, time_column(alt.t_s), rr.Scalars.columns(scalars=alt.altitude_m)))
+    return out
+
+
+def gait_columns(t_s: F64, stance: NDArray[np.bool_], paths: FootPaths, *, previous: bool | None) -> SendColumns | None:
     """StateChange column for the stance/swing lane, only at transitions (None when there are none)."""
     idx = stance_transitions(stance, previous)
     if idx.size == 0:

@@ -209,6 +209,8 @@ class RerunLogger:
         self._floor_logged = False
         self._lines: dict[str, _Line] = {f: _Line([]) for f in self.feet}
         self._steps: dict[str, int] = dict.fromkeys(self.feet, 0)
+        self._tof_totals: dict[str, np.ndarray] = {}
+        """Per foot: ToF readings since the start [used, gated, invalid status] (``convert.tof_columns``)."""
         self._thread = threading.Thread(target=self._run, name="footnav-rerun", daemon=True)
         self._thread.start()
 
@@ -428,6 +430,7 @@ class RerunLogger:
         columns_list += convert.step_columns(
             arrays, nav.pos_cov_n_m2, onsets, paths, sigma_scale=self._sigma_scale
         )
+        columns_list += convert.tof_columns(nav, paths, self._tof_totals.setdefault(foot, np.zeros(3, np.int64)))
         for path, index, columns in columns_list:
             rec.send_columns(path, indexes=[index], columns=columns)
         self._steps[foot] += int(onsets.size)

@@ -14,7 +14,11 @@ so two feet become siblings under ``world/`` and in each plot:
   covariance at each step, on the floor under the marker;
 - ``world/truth/<foot>``  optional ground-truth track;
 - ``plots/<quantity>/<foot>``  Scalars, so one time-series view per quantity shows both feet
-  (stance, clearance, pos_sigma, detector, speed, heading; link health: rate, link_errors);
+  (stance, clearance, pos_sigma, detector, speed, heading; link health: rate, link_errors;
+  ToF units: tof_readings, altitude);
+- ``plots/clearance/<foot>/tof<k>``  each ToF sensor's measured height of the IMU, per reading, and
+  ``plots/clearance/<foot>/stride``  per-stride ``[mid-swing minimum, maximum]`` clearance, in the
+  clearance view;
 - ``gait/<foot>``  StateChange lane (stance/swing transitions only).
 """
 
@@ -139,6 +143,26 @@ class FootPaths:
     def link_errors(self) -> str:
         """Link health: ``[lost packets, reconnects]`` since the start (cumulative counts)."""
         return f"{PLOTS}/link_errors/{self.foot}"
+
+    def tof_height(self, sensor: int) -> str:
+        """ToF sensor ``sensor``'s measured height of the IMU above the surface it hit, m (one point per
+        valid reading), in the clearance view."""
+        return f"{self.clearance}/tof{sensor}"
+
+    @property
+    def stride_clearance(self) -> str:
+        """Per-stride clearance ``[mid-swing minimum, maximum]``, m, at each swing's end."""
+        return f"{self.clearance}/stride"
+
+    @property
+    def tof_readings(self) -> str:
+        """ToF readings since the start ``[used, gated, invalid status]`` (cumulative counts)."""
+        return f"{PLOTS}/tof_readings/{self.foot}"
+
+    @property
+    def altitude(self) -> str:
+        """Barometer pressure altitude relative to the first reading, m."""
+        return f"{PLOTS}/altitude/{self.foot}"
 
     @property
     def gait(self) -> str:

@@ -11,7 +11,6 @@ wire uses it). Helpers derive:
   ``min_between_s + pending_s``. Each step is the true displacement since the previous reset, in the
   heading frame of that reset, and the true heading change, so the steps sum to the truth;
 - :func:`steps_from_footholds`: the same from a footholds table (one step per stride);
-- :func:`tof_from_clearance`: three ToF sensors at ~33 Hz, staggered, ranging the floor;
 - :func:`baro_from_height`: barometric pressure from height (ISA troposphere).
 """
 
@@ -23,16 +22,12 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from device import extensions
-
 F64 = NDArray[np.float64]
 
 RESET_PENDING_S: Final = 0.25
 """``max_time_reset_pending`` of the MIMU-era firmware (protocol-openshoe.md 5.1)."""
 RESET_MIN_BETWEEN_S: Final = 0.75
 """``min_time_between_resets`` of the MIMU-era firmware."""
-TOF_RATE_HZ: Final = 33.0
-TOF_MAX_RANGE_M: Final = 2.0
 SEA_LEVEL_PA: Final = 101_325.0
 
 
@@ -76,7 +71,10 @@ class StepScript:
 
 @dataclass(frozen=True, slots=True)
 class TofScript:
-    """ToF readings: t_s (m,), sensor (m,), range_m (m,) (NaN = none), status (m,)."""
+    """ToF readings: t_s (m,), sensor (m,), range_m (m,) (NaN = none), status (m,).
+
+    Made from a true trajectory by :func:`device.emulator.tof_sensors.tof_readings`.
+    """
 
     t_s: F64
     sensor: NDArray[np.int64]
@@ -180,34 +178,6 @@ def yaw_from_quat_wxyz(quat_nb_wxyz: F64) -> F64:
     """Heading (ZYX yaw) of body-to-nav quaternions (n, 4), continuous."""
     w, x, y, z = np.asarray(quat_nb_wxyz, dtype=np.float64).T
     return np.unwrap(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
-
-
-def tof_from_clearance(
-    t_s: F64,
-    clearance_m: F64,
-    *,
-    rate_hz: float = TOF_RATE_HZ,
-    max_range_m: float = TOF_MAX_RANGE_M,
-    offsets_m: tuple[float, float, float] = (0.02, 0.03, 0.04),
-) -> TofScript:
-    """Three downward ToF sensors at ``rate_hz``, staggered by a third of a period each.
-
-    A sensor whose range exceeds ``max_range_m`` reports a time-out (status 1, no range).
-    """
-    t_s = np.asarray(t_s, dtype=np.float64)
-    period = 1.0 / rate_hz
-    times, sensors = [], []
-    for i in range(extensions.TOF_SENSORS):
-        ti = np.arange(t_s[0] + (i + 1) * period / 3.0, t_s[-1], period)
-        times.append(ti)
-        sensors.append(np.full(ti.size, i))
-    t_all = np.concatenate(times)
-    sensor = np.concatenate(sensors)
-    order = np.argsort(t_all, kind="stable")
-    t_all, sensor = t_all[order], sensor[order]
-    rng = np.interp(t_all, t_s, clearance_m) + np.asarray(offsets_m)[sensor]
-    status = np.where(rng > max_range_m, extensions.TOF_TIMEOUT, extensions.TOF_VALID).astype(np.uint8)
-    return TofScript(t_all, sensor.astype(np.int64), np.where(status == 0, rng, np.nan), status)
 
 
 def baro_from_height(

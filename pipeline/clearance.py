@@ -1,0 +1,104 @@
+"""Per-stride foot clearance: the largest and the mid-swing smallest height of each swing.
+
+A swing is a run of samples the zero-velocity detector did not flag as stance, between two stances.
+For each swing that ends (at the next stance onset) this gives its largest clearance and its smallest
+clearance over the middle half of the swing (25-75 % of its duration): the minimum foot clearance
+(MFC) of gait studies is the local minimum between the toe-off and heel-strike peaks, in mid-swing
+(Winter, *Biomechanics and Motor Control of Human Gait*, 1991; Begg et al., *Gait & Posture* 25,
+2007), not the zero height at either end. The clearance is that of the IMU's reference point
+(``NavBatch.clearance_m``). Streaming: batches may cut a swing anywhere; results do not depend on it.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+F64 = NDArray[np.float64]
+
+MIN_SWING_S = 0.15
+"""Shorter non-stance runs are detector flicker, not strides."""
+
+
+@dataclass(frozen=True, slots=True)
+class StrideClearance:
+    """Clearance per completed swing: t_s (k,) swing end (stance onset), s; min_m (k,) mid-swing
+    minimum; max_m (k,) maximum, m."""
+
+    t_s: F64
+    min_m: F64
+    max_m: F64
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+
+class StrideClearanceTracker:
+    """Streaming per-stride clearance (module docstring)."""
+
+    def __init__(self) -> None:
+        self._in_swing = False
+        self._seen_stance = False
+        self._t: list[F64] = []
+        self._c: list[F64] = []
+
+    def update(self, t_s: F64, clearance_m: F64, stance: NDArray[np.bool_]) -> StrideClearance | None:
+        """Strides completed within this batch (None: none)."""
+        st = stance if stance.dtype == np.bool_ else np.asarray(stance, dtype=bool)
+        if st.all():  # fast paths: the whole batch in one phase (most batches)
+            if self._in_swing and self._t:
+                return self._emit_single(float(t_s[0]))
+            self._in_swing, self._seen_stance = False, True
+            return None
+        if self._seen_stance and not st.any():
+            self._in_swing = True
+            self._t.append(t_s)
+            self._c.append(clearance_m)
+            return None
+        out_t: list[float] = []
+        out_min: list[float] = []
+        out_max: list[float] = []
+        edges = np.flatnonzero(st[1:] != st[:-1]) + 1
+        bounds = np.concatenate([[0], edges, [st.size]])
+        for a, b in itertools.pairwise(bounds.tolist()):
+            if a == b:
+                continue
+            if st[a]:
+                if self._in_swing and self._t:
+                    self._finish(float(t_s[a]), out_t, out_min, out_max)
+                self._in_swing = False
+                self._seen_stance = True
+                self._t, self._c = [], []
+            else:
+                self._in_swing = self._seen_stance
+                if self._in_swing:
+                    self._t.append(t_s[a:b])
+                    self._c.append(clearance_m[a:b])
+        if not out_t:
+            return None
+        return StrideClearance(np.asarray(out_t), np.asarray(out_min), np.asarray(out_max))
+
+    def _emit_single(self, t_end: float) -> StrideClearance | None:
+        out_t: list[float] = []
+        out_min: list[float] = []
+        out_max: list[float] = []
+        self._finish(t_end, out_t, out_min, out_max)
+        self._in_swing, self._seen_stance = False, True
+        self._t, self._c = [], []
+        if not out_t:
+            return None
+        return StrideClearance(np.asarray(out_t), np.asarray(out_min), np.asarray(out_max))
+
+    def _finish(self, t_end: float, out_t: list[float], out_min: list[float], out_max: list[float]) -> None:
+        t = np.concatenate(self._t)
+        c = np.concatenate(self._c)
+        if t[-1] - t[0] < MIN_SWING_S:
+            return
+        lo, hi = t[0] + 0.25 * (t[-1] - t[0]), t[0] + 0.75 * (t[-1] - t[0])
+        mid = (t >= lo) & (t <= hi)
+        out_t.append(t_end)
+        out_min.append(float(np.min(c[mid])))
+        out_max.append(float(np.max(c)))

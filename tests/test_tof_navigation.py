@@ -1,0 +1,166 @@
+"""ToF aiding in the navigator, on emulated recordings: the issue's figures, the side-by-side run
+without the ToF channel, streaming against batch, and bad input (time-outs, invalid statuses, step
+edges, reflective floors)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.experiments import tof as exp
+from device.emulator.tof_sensors import TofSensorModel
+from pipeline.navigator import NavConfig, Navigator, navigate
+from pipeline.profiles import get_profile
+from pipeline.samples import ImuBatch
+from pipeline.tof_aiding import RangeBatch, TofConfig
+
+
+@pytest.fixture(scope="module")
+def walk70() -> exp.Recording:
+    return exp.record("rectangle", 70.0, seed=1)
+
+
+@pytest.fixture(scope="module")
+def stairs70() -> exp.Recording:
+    return exp.record("stairs", 70.0, seed=1)
+
+
+def test_70s_walk_meets_the_issue_figures(walk70: exp.Recording) -> None:
+    zupt, tof = exp.compare(walk70)
+    assert tof.clearance_rms_m <= 0.01
+    assert zupt.z_stance_rms_m >= 5.0 * tof.z_stance_rms_m
+    assert tof.xy_stance_rms_m <= zupt.xy_stance_rms_m
+    assert tof.readings["used"] > 0.75 * len(walk70.ranges)
+    assert zupt.readings == {}
+
+
+def test_stairs_floor_is_followed_and_never_gone_through(stairs70: exp.Recording) -> None:
+    config = NavConfig(profile=get_profile("mpu6500x4"))
+    t = stairs70.truth
+    nav, _ = navigate(t.t_s, stairs70.acc_b_mps2, stairs70.gyr_b_radps, t.rate_hz, config, ranges=stairs70.ranges)
+    assert nav is not None and nav.floor_z_m is not None and nav.ranges is not None
+    first = len(t) - len(nav)
+    floor_err = nav.floor_z_m - t.floor_z_m[first:]
+    assert np.mean(np.abs(floor_err) < 0.03) > 0.98  # the tread under the IMU, 24 risers up and down
+    assert np.min(nav.pos_n_m[:, 2] - t.floor_z_m[first:]) > -0.03  # never through the floor
+    codes = exp._counts(nav)
+    assert codes["step_edge"] > 500  # rays that saw the next tread in swing: gated, counted
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="not met on stairs: clearance 1.51 cm RMS; the floor under the IMU is taken from the wrong "
+    "tread for a few ms at each step edge (0.5 cm RMS away from the edges)",
+)
+def test_stairs_clearance_within_1cm(stairs70: exp.Recording) -> None:
+    _, tof = exp.compare(stairs70)
+    assert tof.clearance_rms_m <= 0.01
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="not met on stairs: vertical error at footfalls 3.0x lower than ZUPT alone with seed 1 (0.40 vs "
+    "1.18 cm), 0.8-0.9x with seeds 2-3: each new tread's height carries the inertial drift of its first stance",
+)
+def test_stairs_vertical_error_5x_lower(stairs70: exp.Recording) -> None:
+    zupt, tof = exp.compare(stairs70)
+    assert zupt.z_stance_rms_m >= 5.0 * tof.z_stance_rms_m
+
+
+def test_without_the_tof_channel_the_result_is_the_inertial_one(walk70: exp.Recording) -> None:
+    """Readings decoded and shown but not used: the batch is split at every reading, and the result
+    is the inertial-only one to the last bit (so the side-by-side gain is the ToF's alone)."""
+    t = walk70.truth
+    plain, _ = navigate(t.t_s, walk70.acc_b_mps2, walk70.gyr_b_radps, t.rate_hz)
+    shown, _ = navigate(
+        t.t_s, walk70.acc_b_mps2, walk70.gyr_b_radps, t.rate_hz, ranges=walk70.ranges, tof=TofConfig(use=False)
+    )
+    assert plain is not None and shown is not None and shown.ranges is not None
+    np.testing.assert_array_equal(shown.pos_n_m, plain.pos_n_m)
+    np.testing.assert_array_equal(shown.quat_nb_wxyz, plain.quat_nb_wxyz)
+    assert plain.ranges is None and len(shown.ranges) > 6000
+
+
+def test_streaming_in_small_batches_matches_the_batch_run(walk70: exp.Recording) -> None:
+    """Live: 5 ms reads, each read's ToF readings queued before its IMU samples, as the session does."""
+    t, rec = walk70.truth, walk70
+    n = 40_000
+    batch_nav, _ = navigate(t.t_s[:n], rec.acc_b_mps2[:n], rec.gyr_b_radps[:n], t.rate_hz, ranges=rec.ranges)
+    nav = Navigator(NavConfig(), t.rate_hz)
+    outs = []
+    for a in range(0, n, 5):
+        b = min(a + 5, n)
+        sel = (rec.ranges.t_s >= (t.t_s[a - 1] if a else -1.0)) & (rec.ranges.t_s < t.t_s[b - 1])
+        nav.add_ranges(rec.ranges.select(sel))
+        idx = np.arange(a, b)
+        out = nav.process(
+            ImuBatch(t.t_s[idx], rec.acc_b_mps2[idx], rec.gyr_b_radps[idx], idx, np.zeros(b - a, np.int64))
+        )
+        if out is not None:
+            outs.append(out)
+    pos = np.concatenate([o.pos_n_m for o in outs])
+    assert batch_nav is not None and pos.shape == batch_nav.pos_n_m.shape
+    assert np.max(np.abs(pos - batch_nav.pos_n_m)) < 2e-3
+    assert nav.tof.counts.get("late") > 0  # readings that came in the read after their sample
+
+
+def _bad_recording(path: str) -> tuple[exp.Recording, RangeBatch]:
+    sensors = TofSensorModel(seed=9, timeout_rate=0.2, spurious_rate=0.1)
+    rec = exp.record(path, 70.0, seed=4, sensors=sensors)
+    # a reading from a sensor that does not exist, a sensor error, a zero range with a valid status
+    extra = RangeBatch(
+        t_s=np.array([10.0001, 10.0002, 20.0001]),
+        sensor=np.array([7, 1, 1], dtype=np.int64),
+        range_m=np.array([0.05, np.nan, 0.0]),
+        status=np.array([0, 4, 0], dtype=np.uint8),
+    )
+    return rec, RangeBatch.concat([rec.ranges, extra])
+
+
+def test_bad_input_is_gated_counted_and_never_pulls_through_the_floor() -> None:
+    """Flat floor, 20 % time-outs, 10 % reflections (ranges 5-50 cm too long), odd readings."""
+    rec, ranges = _bad_recording("rectangle")
+    t = rec.truth
+    zupt, _ = navigate(t.t_s, rec.acc_b_mps2, rec.gyr_b_radps, t.rate_hz)
+    nav, _ = navigate(t.t_s, rec.acc_b_mps2, rec.gyr_b_radps, t.rate_hz, ranges=ranges)
+    assert nav is not None and nav.ranges is not None and zupt is not None
+    counts = exp._counts(nav)
+    assert counts["timeout"] > 0.15 * len(rec.ranges)
+    assert counts["outlier"] + counts["step_edge"] > 0.05 * len(rec.ranges)  # the reflections
+    assert counts["unknown_sensor"] == 1 and counts["sensor_error"] >= 1
+    first = len(t) - len(nav)
+    assert np.min(nav.pos_n_m[:, 2] - t.floor_z_m[first:]) > -0.01  # never through the floor
+    assert np.min(nav.clearance_m) > -0.01
+    still = t.stance[first:]
+    err_z = nav.pos_n_m[still, 2] - t.pos_n_m[first:][still, 2]
+    err_z0 = zupt.pos_n_m[still, 2] - t.pos_n_m[first:][still, 2]
+    assert np.sqrt(np.mean(err_z**2)) < 0.2 * np.sqrt(np.mean(err_z0**2))
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="not met: on stairs with 10 % reflections the vertical error at footfalls is 2.4x that of "
+    "ZUPT alone (4.6 vs 1.9 cm): a tread's level is taken from the state at its first stance",
+)
+def test_bad_input_on_stairs_is_no_worse_than_zupt_alone() -> None:
+    rec, ranges = _bad_recording("stairs")
+    t = rec.truth
+    zupt, _ = navigate(t.t_s, rec.acc_b_mps2, rec.gyr_b_radps, t.rate_hz)
+    nav, _ = navigate(t.t_s, rec.acc_b_mps2, rec.gyr_b_radps, t.rate_hz, ranges=ranges)
+    assert nav is not None and zupt is not None
+    first = len(t) - len(nav)
+    still = t.stance[first:]
+    err_z = nav.pos_n_m[still, 2] - t.pos_n_m[first:][still, 2]
+    err_z0 = zupt.pos_n_m[still, 2] - t.pos_n_m[first:][still, 2]
+    assert np.sqrt(np.mean(err_z**2)) <= np.sqrt(np.mean(err_z0**2))
+
+
+def test_experiment_command_prints_the_side_by_side_table(capsys: pytest.CaptureFixture[str]) -> None:
+    from app.cli import main
+
+    assert main(["experiment", "tof", "--duration", "15"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    rows = [line for line in out if line.startswith(("rectangle", "line", "stairs"))]
+    assert len(rows) == 6  # three walks, each with and without the ToF channel
+    assert sum("ZUPT+ToF" in r and "used" in r for r in rows) == 3
+    assert sum("lower with ToF" in line for line in out) == 3
