@@ -12,6 +12,7 @@ from pipeline.loaders import CsvMapping, Recording, load_recording
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavConfig, NavStats, navigate
 from pipeline.profiles import get_profile
+from pipeline.saturation import reconstruct_saturated_rates
 
 EXPORT_COLUMNS = (
     "t",
@@ -37,16 +38,20 @@ def navigate_recording(
 ) -> tuple[NavBatch, NavStats]:
     """Run the navigator (and the smoother when asked) over a whole recording.
 
+    The gyroscope's saturated stretches are reconstructed first (``pipeline.saturation``: this needs
+    the whole recording, so it happens here and not in the live navigator).
+
     Raises:
         FootnavError: the recording never stands still, so it cannot be aligned.
     """
     config = NavConfig(profile=get_profile(profile or rec.profile))
+    gyr, _ = reconstruct_saturated_rates(rec.t_s, rec.gyr_b_radps)
     if smooth:
         from pipeline.smoother import smooth_recording
 
-        nav, stats = smooth_recording(rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, rec.rate_hz, config)
+        nav, stats = smooth_recording(rec.t_s, rec.acc_b_mps2, gyr, rec.rate_hz, config)
     else:
-        nav, stats = navigate(rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, rec.rate_hz, config)
+        nav, stats = navigate(rec.t_s, rec.acc_b_mps2, gyr, rec.rate_hz, config)
     if nav is None:
         raise FootnavError(
             f"{rec.name}: the unit is never still for {config.align_s:.1f} s, so roll and pitch cannot be "

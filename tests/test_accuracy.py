@@ -29,9 +29,13 @@ def evaluations(shared_data: Path):  # type: ignore[no-untyped-def]
 def test_pyshoe_vicon_trials(evaluations) -> None:  # type: ignore[no-untyped-def]
     armse = np.array([r.armse_2d_m for r in evaluations.values() if r.format == "pyshoe"])
     assert armse.size == 9
-    assert armse.mean() <= 0.11 and armse.max() <= 0.30
+    # measured 0.078 / 0.065 / 0.157 m (mean / median / max); 0.081 / 0.069 / 0.157 with the ZARU
+    # gate at 99 % (pipeline.navigator), 0.094 / 0.069 / 0.270 without the debounce's hysteresis
+    # (pipeline.detectors) too, 0.100 / 0.075 / 0.282 without reconstructing the saturated gyro
+    # stretches as well (pipeline.saturation)
+    assert armse.mean() <= 0.085 and armse.max() <= 0.20
     # pyshoe with one fixed threshold averages 2.29 m on this dataset (DATA.md)
-    assert np.median(armse) <= 0.085
+    assert np.median(armse) <= 0.072
 
 
 def test_closed_loops(evaluations) -> None:  # type: ignore[no-untyped-def]

@@ -119,3 +119,33 @@ def test_debounce_drops_short_dips_and_is_batch_independent(chunk: int) -> None:
     assert not still[480:540].any()
     assert still[1000 + det.window + det._min_run : 1100].all()
     np.testing.assert_array_equal(still, StreamingDetector(p, 1000.0).update(acc, gyr)[2])
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 400])
+def test_a_stance_hovering_at_the_threshold_is_kept_and_a_swing_dip_is_not(chunk: int) -> None:
+    """Hysteresis of the debounce: a running stance's statistic crosses the threshold every few
+    samples but stays near it; a swing's ballistic dip comes from far above and stays rejected."""
+    n = 400
+    rng = np.random.default_rng(3)
+    gyr = np.zeros((n, 3))
+    acc = np.tile([0.0, 0.0, 9.80665], (n, 1))
+    # swing: |ω| of 3 rad/s (T ~ 2e4 with the default scales, decades above the threshold of 25)
+    gyr[:, 0] = 3.0
+    gyr[100:112, 0] = 0.0  # a 12 ms ballistic dip of the swing
+    # a 100 ms stance whose statistic wanders between 0.8 and 1.1 times the threshold:
+    # T = mean |ω|² / σg² over the (two-sample) window, σg = 0.02 rad/s
+    level = np.where(rng.random(100) < 0.5, 0.8, 1.1) * 25.0
+    gyr[250:350, 0] = 0.02 * np.sqrt(level)
+    p = DetectorParams(adaptive=False, window_s=0.002, min_stance_s=0.02)
+    det = StreamingDetector(p, 1000.0)
+    stat = np.empty(n)
+    still = np.empty(n, dtype=bool)
+    for i in range(0, n, chunk):
+        stat[i : i + chunk], _, still[i : i + chunk] = det.update(acc[i : i + chunk], gyr[i : i + chunk])
+    assert not still[90:130].any()
+    below = stat < 25.0
+    assert 0.2 < below[252:350].mean() < 0.8 and (stat[252:350] < 25.0 * 1.26).all()
+    # after the first 20 ms (and the window) every sample below the threshold is stance, and only those
+    np.testing.assert_array_equal(still[272:350], below[272:350])
+    plain = StreamingDetector(dataclasses.replace(p, stance_hysteresis_decades=0.0), 1000.0)
+    assert plain.update(acc, gyr)[2][250:350].sum() < still[250:350].sum() / 4  # without it: mostly lost

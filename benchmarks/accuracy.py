@@ -1,0 +1,107 @@
+"""Accuracy table of every recording with ground truth, causal and RTS-smoothed, in one command.
+
+    .venv/bin/python -m benchmarks.accuracy [--data ../shared/data] [--no-emulator] [--no-smooth]
+
+Real recordings (``../shared/data``, see its DATA.md): the PyShoe VICON trials (ARMSE-2D as the
+PyShoe authors compute it, ``pipeline.metrics.armse_2d_pyshoe``, and ATE-3D after a yaw +
+translation fit), the x-io and OpenShoe closed loops (loop closure 3D and 2D). Emulated walks
+(``device.emulator``, MPU-6500-class errors, the seeds of ``tests/test_accuracy.py``): end-point error
+as % of distance for the rectangle, figure-eight and stairs, and the filter's consistency, the mean
+NEES of the 3D position (error ᵀ P⁻¹ error over all samples; for a consistent filter its mean is 3,
+Bar-Shalom, Li, Kirubarajan, "Estimation with Applications to Tracking and Navigation", 2001,
+§5.4.2, and the 95 % band of a time average over N independent samples is χ²₃ₙ/N; samples of one
+walk are strongly correlated, so the band is only indicative).
+
+One default configuration for every file (``app.export.navigate_recording``); nothing is tuned to
+a file. The ground truth is used only to measure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from app.evaluate import evaluate_file, find_recordings
+from device.emulator.gait import simulate_walk
+from device.emulator.imu_errors import corrupt
+from pipeline.navigator import NavConfig, navigate
+from pipeline.profiles import get_profile
+
+DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+EMULATED = (("rectangle", 240.0, 7), ("figure8", 240.0, 7), ("stairs", 60.0, 1))
+
+
+def real_rows(data: Path, smooth: bool) -> list[tuple[str, str, float, float, float, float]]:
+    """(name, format, ARMSE-2D, ATE-3D, loop 3D, loop 2D) per recording (NaN where not applicable)."""
+    rows = []
+    for f in find_recordings([data]):
+        e = evaluate_file(f, smooth)
+        rows.append((e.name, e.format, e.armse_2d_m, e.ate_3d_m, e.loop_3d_m, e.loop_2d_m))
+    return rows
+
+
+def emulated_row(path: str, duration_s: float, seed: int) -> tuple[float, float, float]:
+    """(end-point error % of distance, final vertical error m, mean position NEES) of one emulated walk."""
+    truth = simulate_walk(path, duration_s, rate_hz=1000.0, seed=0)
+    acc, gyr, _ = corrupt(truth.acc_b_mps2, truth.gyr_b_radps, truth.rate_hz, "mpu6500x4", seed=seed)
+    nav, _ = navigate(truth.t_s, acc, gyr, truth.rate_hz, NavConfig(profile=get_profile("mpu6500x4")))
+    assert nav is not None
+    true_pos = truth.pos_n_m[-len(nav) :]
+    err = nav.pos_n_m - true_pos
+    pct = 100.0 * float(np.linalg.norm(err[-1])) / truth.distance_m
+    cov = nav.pos_cov_n_m2
+    # skip the first second: the covariance starts tiny and the error at exactly 0
+    k0 = int(truth.rate_hz)
+    e, c = err[k0:], cov[k0:]
+    nees = np.einsum("ni,nij,nj->n", e, np.linalg.inv(c), e)
+    return pct, float(err[-1, 2]), float(nees.mean())
+
+
+def _f(v: float) -> str:
+    return f"{'-':>7}" if math.isnan(v) else f"{v:7.3f}"
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
+    ap.add_argument("--no-emulator", action="store_true")
+    ap.add_argument("--no-smooth", action="store_true")
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    modes = [False] if args.no_smooth else [False, True]
+    results = {m: real_rows(args.data, m) for m in modes}
+    print(
+        f"{'recording':<22} {'format':<8} "
+        + " ".join(
+            f"{h:>7}" for m in modes for h in (("s." if m else "") + x for x in ("ARMSE", "ATE3D", "loop3D", "loop2D"))
+        )
+    )
+    for i, row in enumerate(results[False]):
+        cells = []
+        for m in modes:
+            cells += [_f(v) for v in results[m][i][2:]]
+        print(f"{row[0][:22]:<22} {row[1]:<8} " + " ".join(cells))
+    for m in modes:
+        a = np.array([r[2] for r in results[m] if r[1] == "pyshoe"])
+        loops = {r[0]: (r[4], r[5]) for r in results[m] if not math.isnan(r[4])}
+        label = "smoothed" if m else "causal  "
+        loop_txt = "  ".join(f"{k} 3D {v[0]:.3f} 2D {v[1]:.3f}" for k, v in loops.items())
+        print(
+            f"{label}: PyShoe ARMSE-2D mean {a.mean():.3f} median {np.median(a):.3f} max {a.max():.3f} m;  {loop_txt}"
+        )
+    if not args.no_emulator:
+        for path, dur, seed in EMULATED:
+            pct, dz, nees = emulated_row(path, dur, seed)
+            print(
+                f"emulated {path:<10} end error {pct:.3f} % of distance, final dz {dz:+.3f} m, "
+                f"mean NEES(pos) {nees:.2f}"
+            )
+    print(f"({time.perf_counter() - t0:.0f} s)")
+
+
+if __name__ == "__main__":
+    main()
