@@ -162,6 +162,19 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="a ToF multi-sensor unit: switch on its ToF and barometer states, fuse the ranges",
     )
+    live.add_argument(
+        "--dual-imu",
+        action="store_true",
+        help="a dual-IMU board: stream both IMUs (raw output 0x28, mask 0b11) to the dual-IMU filter",
+    )
+    live.add_argument(
+        "--lever-arm",
+        type=float,
+        nargs=3,
+        default=None,
+        metavar=("X", "Y", "Z"),
+        help="with --dual-imu: IMU 2's position in IMU 1's axes, m (default 0.01 0.01 0)",
+    )
     _add_config_args(live)
     _add_stance_arg(live, default="inertial")
     live.add_argument(
@@ -327,6 +340,7 @@ def _config(args: argparse.Namespace) -> Config:
 
 def _live(args: argparse.Namespace, argv: list[str]) -> int:
     from app.live import LiveOptions, run_live
+    from pipeline.dual_navigator import DEFAULT_LEVER_B_M
 
     one = [name for name, value in (("--port", args.port), ("--ble", args.ble)) if value is not None]
     if len(one) > 1 or (one and (args.left or args.right)):
@@ -356,6 +370,7 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
             argv=("footnav", *argv),
             tof=args.tof,
             stance=args.stance,
+            dual_imu_lever_b_m=(_lever(args.lever_arm) or DEFAULT_LEVER_B_M) if args.dual_imu else None,
         )
     )
 

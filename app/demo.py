@@ -31,6 +31,8 @@ from app.live import (
     FootRun,
     attach_unit,
     calibration_lookup,
+    dual_nav_config,
+    dual_view_sink,
     finish_capture,
     foot_sinks,
     link_reporter,
@@ -53,15 +55,12 @@ from device.emulator.scripts import BaroScript, TofScript, baro_from_height
 from device.emulator.tof_sensors import TofSensorModel, tof_readings
 from device.raw_imu import DUAL_IMU_MASK
 from device.unit import RawImuMode
-from pipeline.dual_imu_eskf import DualEskfConfig
 from pipeline.dual_imu_lever import check_lever_arm
-from pipeline.dual_navigator import DualNavConfig, DualNavigator
-from pipeline.nav_types import NavBatch
+from pipeline.dual_navigator import DualNavigator
 from pipeline.navigator import Navigator
 from pipeline.profiles import get_profile
 from pipeline.runner import NavSink
-from views.dual_imu import DualRunView
-from views.outputs import SessionViews, open_session_views
+from views.outputs import open_session_views
 
 PATHS = ("rectangle", "line", "figure8", "stairs")
 DEMO_PUT_TIMEOUT_S = 60.0
@@ -250,9 +249,7 @@ def run_demo(opts: DemoOptions) -> int:
     status = StatusLine(feet=feet)
     nav_config = cfg.nav_config()
     lever = opts.lever_b_m or DEFAULT_LEVER_B_M
-    dual_config = DualNavConfig(
-        filter=DualEskfConfig(profile=nav_config.profile), detector=nav_config.detector, lever_b_m=lever
-    )
+    dual_config = dual_nav_config(nav_config, lever)
     runs = [
         FootRun(
             foot,
@@ -330,31 +327,6 @@ def run_demo(opts: DemoOptions) -> int:
             listed = ", ".join(f"{k} {v}" for k, v in sorted(counts.items(), key=lambda kv: -kv[1]))
             print(f"{prefix}ToF readings: {listed or 'none received'}")
     return code
-
-
-def dual_view_sink(navigator: DualNavigator, views: SessionViews, run: str) -> NavSink:
-    """A sink that shows the dual-IMU board's own outputs for each batch: both IMUs' tracks (rigidly
-    ``C m`` apart) and the constraint residuals (equal rate, equal specific force in stance)."""
-
-    def show(nav: NavBatch) -> None:
-        track = navigator.last_track
-        if track is None or track.pos1_n_m.shape[0] != len(nav):
-            return
-        views.log_dual(
-            DualRunView(
-                t_s=nav.t_s,
-                truth_n_m=None,
-                tracks_n_m={},
-                imu_tracks_n_m={"imu1": track.pos_imu_n_m[:, 0], "imu2": track.pos_imu_n_m[:, 1]},
-                residuals={
-                    "rate_diff_dps": np.degrees(track.residual_rate_radps),
-                    "force_diff_mps2": track.residual_force_mps2,
-                },
-            ),
-            run=run,
-        )
-
-    return show
 
 
 def dual_summary_lines(

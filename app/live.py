@@ -31,14 +31,17 @@ from app.session import CalibrationLookup, LinkHealth, SerialSessionResult, Unit
 from app.status import StatusLine
 from device.capture import CaptureTap, CaptureWriter, UnitHeader
 from device.links import LinkEvent, LinkGap, ReconnectingLink
-from device.unit import OpenShoeUnit
-from pipeline.dual_navigator import DualNavigator
+from device.raw_imu import DUAL_IMU_MASK
+from device.unit import OpenShoeUnit, RawImuMode
+from pipeline.dual_imu_eskf import DualEskfConfig
+from pipeline.dual_navigator import DualNavConfig, DualNavigator
 from pipeline.errors import DeviceError, FootnavError
 from pipeline.height_detector import HEIGHT_MODES, HeightDetectorParams, HeightMode
 from pipeline.nav_types import NavBatch
-from pipeline.navigator import Navigator
+from pipeline.navigator import NavConfig, Navigator
 from pipeline.runner import NavSink
 from pipeline.tof_aiding import TofConfig
+from views.dual_imu import DualRunView
 from views.outputs import SessionViews, open_session_views
 
 if TYPE_CHECKING:
@@ -314,6 +317,38 @@ def finish_capture(capture: CaptureWriter | None, runs: Sequence[FootRun]) -> No
     )
 
 
+def dual_nav_config(nav_config: NavConfig, lever_b_m: tuple[float, float, float]) -> DualNavConfig:
+    """The dual-IMU navigator's settings from the single-IMU ones (same profile and detector)."""
+    return DualNavConfig(
+        filter=DualEskfConfig(profile=nav_config.profile), detector=nav_config.detector, lever_b_m=lever_b_m
+    )
+
+
+def dual_view_sink(navigator: DualNavigator, views: SessionViews, run: str) -> NavSink:
+    """A sink that shows the dual-IMU board's own outputs for each batch: both IMUs' tracks (rigidly
+    ``C m`` apart) and the constraint residuals (equal rate, equal specific force in stance)."""
+
+    def show(nav: NavBatch) -> None:
+        track = navigator.last_track
+        if track is None or track.pos1_n_m.shape[0] != len(nav):
+            return
+        views.log_dual(
+            DualRunView(
+                t_s=nav.t_s,
+                truth_n_m=None,
+                tracks_n_m={},
+                imu_tracks_n_m={"imu1": track.pos_imu_n_m[:, 0], "imu2": track.pos_imu_n_m[:, 1]},
+                residuals={
+                    "rate_diff_dps": np.degrees(track.residual_rate_radps),
+                    "force_diff_mps2": track.residual_force_mps2,
+                },
+            ),
+            run=run,
+        )
+
+    return show
+
+
 @dataclass(frozen=True)
 class LiveOptions:
     """What ``footnav live`` was asked for.
@@ -325,6 +360,8 @@ class LiveOptions:
             ``device.emulator.ble_backend.bumble_backend(adapter)``; None = the platform's.
         collect: tests only: an extra NavSink per foot (given the foot name).
         tof: switch on the units' ToF and barometer extension states and fuse the ToF readings.
+        dual_imu_lever_b_m: the units are dual-IMU boards with IMU 2 at this lever arm in IMU 1's
+            axes, m: their raw two-IMU output (0x28, mask 0b11) goes to the dual-IMU navigator.
         stance: stance detector mode with ToF units (``pipeline.height_detector.HeightDetectorParams``).
     """
 
@@ -339,6 +376,7 @@ class LiveOptions:
     collect: Callable[[str], NavSink] | None = None
     tof: bool = False
     stance: str = "inertial"
+    dual_imu_lever_b_m: tuple[float, float, float] | None = None
 
 
 def run_live(opts: LiveOptions) -> int:
@@ -365,25 +403,35 @@ async def live_session(opts: LiveOptions) -> int:
     feet = tuple(opts.ports)
     two_feet = len(feet) > 1
     session_id = new_session_id("live")
+    dual = opts.dual_imu_lever_b_m
+    if dual is not None and opts.tof:
+        raise FootnavError("a unit is either a dual-IMU board or a ToF unit: give --dual-imu or --tof, not both")
     views, notes = open_session_views(
-        save=opts.save, want_viewer=opts.viewer, web=opts.web, feet=feet, recording_id=session_id, notice=notice
+        save=opts.save,
+        want_viewer=opts.viewer,
+        web=opts.web,
+        feet=feet,
+        recording_id=session_id,
+        notice=notice,
+        dual_runs=feet if dual is not None else (),
     )
     for note in notes:
         print(note, file=sys.stderr)
     capture = open_capture(cfg, session_id, enabled=opts.capture, extra={"command": " ".join(opts.argv)})
     status = StatusLine(feet=feet)
     nav_config = cfg.nav_config()
-    runs = [
-        FootRun(
-            foot,
-            str(addresses[foot]),
-            Navigator(nav_config, rate_hz=BASE_RATE_HZ / 2 ** dividers[foot], tof=tof_config(opts.stance)),
-            rate_divider_log2=dividers[foot],
-        )
-        for foot in feet
-    ]
+
+    def navigator(foot: str) -> Navigator | DualNavigator:
+        rate_hz = BASE_RATE_HZ / 2 ** dividers[foot]
+        if dual is not None:
+            return DualNavigator(dual_nav_config(nav_config, dual), rate_hz=rate_hz)
+        return Navigator(nav_config, rate_hz=rate_hz, tof=tof_config(opts.stance))
+
+    runs = [FootRun(foot, str(addresses[foot]), navigator(foot), rate_divider_log2=dividers[foot]) for foot in feet]
     for run in runs:
         foot_sinks(run, views, status, two_feet=two_feet)
+        if views is not None and isinstance(run.navigator, DualNavigator):
+            run.sinks.append(dual_view_sink(run.navigator, views, run.foot))
         if opts.collect is not None:
             run.sinks.append(opts.collect(run.foot))
         if capture is not None:
@@ -395,6 +443,7 @@ async def live_session(opts: LiveOptions) -> int:
             )
 
     async def session(run: FootRun) -> None:
+        raw = RawImuMode(imu_mask=DUAL_IMU_MASK, rate_divider_log2=run.rate_divider_log2)
         await run_device_session(
             addresses[run.foot],
             run.navigator,
@@ -406,8 +455,9 @@ async def live_session(opts: LiveOptions) -> int:
             on_open=lambda unit: attach_unit(run, unit),
             on_link_event=link_reporter(run, views, capture, two_feet=two_feet),
             ble_backend=opts.ble_backend,
-            calibration=calibration_lookup(cfg, run.foot, capture, views, two_feet=two_feet),
+            calibration=calibration_lookup(cfg, run.foot, capture, views, two_feet=two_feet) if dual is None else None,
             extensions=opts.tof,
+            mode=raw if dual is not None else None,
         )
 
     if views is not None:

@@ -28,6 +28,9 @@ from pipeline.navigator import NavStats
 
 F64 = NDArray[np.float64]
 
+DEFAULT_LEVER_B_M: tuple[float, float, float] = (0.01, 0.01, 0.0)
+"""IMU 2's position in IMU 1's body axes on the default board, m (1.4 cm apart; Chen et al. 2022 use 1-2 cm)."""
+
 
 class TwoImuSamples(Protocol):
     """A batch of a two-IMU board (the device layer's ``RawImuBatch`` with two IMUs is one)."""
@@ -67,7 +70,7 @@ class DualNavConfig:
 
     filter: DualEskfConfig = field(default_factory=DualEskfConfig)
     detector: DetectorParams = field(default_factory=DetectorParams)
-    lever_b_m: tuple[float, float, float] = (0.01, 0.01, 0.0)
+    lever_b_m: tuple[float, float, float] = DEFAULT_LEVER_B_M
     align_max_rate_radps: float = 0.3
     max_wait_s: float = 30.0
 

@@ -83,3 +83,44 @@ def test_demo_dual_imu_end_to_end_reports_a_board_mounted_differently(tmp_path: 
     assert rows(dual.imu("imu1")) == rows(dual.imu("imu2")) >= 2_000
     assert rows(dual.residual("rate_diff_dps", "x")) >= 1_500  # one per 10 samples, both IMUs usable
     assert rows(dual.residual("force_diff_mps2", "z")) >= 2_000  # stance samples
+
+
+async def test_live_dual_imu_over_the_serial_path_follows_the_walk(tmp_path: Path) -> None:
+    """``footnav live --dual-imu --port PTY``: the board's 0x28 stream through the real serial code
+    into the dual-IMU navigator; the capture holds the session."""
+    import asyncio
+    import math
+
+    from app.config import defaults
+    from app.live import LiveOptions, live_session
+    from device.emulator.pty_server import PtyShoeServer
+    from pipeline.nav_types import NavBatch
+
+    rec = simulate_dual_imu("rectangle", seed=3)
+    truth = rec.truth.imu1
+    n = truth.t_s.size
+    got: list[NavBatch] = []
+    cfg = defaults()
+    cfg.set("session.sessions_dir", str(tmp_path), "test")
+    with PtyShoeServer(
+        truth.t_s, rec.acc_b_mps2[:, 0], rec.gyr_b_radps[:, 0], speed=math.inf,
+        imu_acc_b_mps2=rec.acc_b_mps2, imu_gyr_b_radps=rec.gyr_b_radps,
+    ) as server:  # fmt: skip
+        opts = LiveOptions(
+            ports={"foot": server.port}, config=cfg, viewer=False, collect=lambda _foot: got.append,
+            dual_imu_lever_b_m=DEFAULT_LEVER_B_M,
+        )  # fmt: skip
+        task = asyncio.create_task(live_session(opts))
+        async with asyncio.timeout(120):
+            while sum(len(b) for b in got) < n - 1000 and not task.done():
+                await asyncio.sleep(0.2)
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+    navigated = sum(len(b) for b in got)
+    assert navigated >= n - 1000
+    end = got[-1]
+    k = int(np.rint(end.t_s[-1] * truth.rate_hz))  # session time starts at the first sample
+    error_m = float(np.linalg.norm(end.pos_n_m[-1] - truth.pos_n_m[k]))
+    assert error_m < 0.01 * truth.distance_m, error_m
+    assert list(tmp_path.glob("*.mcap"))

@@ -37,11 +37,12 @@ from device.emulator import paths
 from device.emulator.gait import GaitTruth, simulate_walk
 from device.emulator.imu_errors import ImuErrorsApplied, ImuGrade, corrupt
 from pipeline.dual_imu_common import quat_to_mats
+from pipeline.dual_navigator import DEFAULT_LEVER_B_M as DEFAULT_BOARD_LEVER_B_M
 
 F64 = NDArray[np.float64]
 
-DEFAULT_LEVER_B_M: Final = (0.01, 0.01, 0.0)
-"""IMU 2's position in IMU 1's body axes, m (the issue's default: 1.4 cm apart on the board)."""
+DEFAULT_LEVER_B_M: Final = DEFAULT_BOARD_LEVER_B_M
+"""IMU 2's position in IMU 1's body axes on the emulated board, m: the navigator's default."""
 
 DEFAULT_GRADE: Final = "icm20948"
 
