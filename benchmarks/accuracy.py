@@ -65,7 +65,7 @@ def _f(v: float) -> str:
     return f"{'-':>7}" if math.isnan(v) else f"{v:7.3f}"
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
     ap.add_argument("--no-emulator", action="store_true")
@@ -101,7 +101,8 @@ def main(argv: list[str] | None = None) -> None:
                 f"mean NEES(pos) {nees:.2f}"
             )
     print(f"({time.perf_counter() - t0:.0f} s)")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -124,7 +124,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=3, help="repeats per figure; the best counts (3)")
     ap.add_argument("--batch", type=int, default=50, help="samples per batch in the streamed row (50)")
     ap.add_argument("--no-compile", action="store_true", help="skip the compile-time measurement")
+    ap.add_argument(
+        "--all",
+        action="store_true",
+        help="then the whole system too: benchmarks.e2e (latency, CPU, hour replay, .rrd, memory), "
+        "benchmarks.soak (an hour of two feet, accelerated) and benchmarks.accuracy (about 12 minutes)",
+    )
     args = ap.parse_args(argv)
+    if args.all:
+        code = main([a for a in (argv if argv is not None else sys.argv[1:]) if a != "--all"])
+        from benchmarks import accuracy, e2e, soak
+
+        for name, run in (("e2e", e2e.main), ("soak", soak.main), ("accuracy", accuracy.main)):
+            print(f"\n{'=' * 30} benchmarks.{name} {'=' * 30}\n", flush=True)
+            code |= run([])
+        return code
 
     print("footnav estimator benchmark\n")
     for key, value in machine():

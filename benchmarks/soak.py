@@ -113,7 +113,9 @@ class SoakResult:
     @property
     def growth_mb(self) -> float:
         """RSS at the end minus RSS at the start of the second half (median of the first/last 5 samples)."""
-        half = np.flatnonzero(self.rss_t_s >= self.rss_t_s[-1] / 2) if self.rss_t_s.size else []
+        if self.rss_t_s.size < 10:
+            return math.nan
+        half = np.flatnonzero(self.rss_t_s >= self.rss_t_s[-1] / 2)
         if len(half) < 10:
             return math.nan
         return float(np.median(self.rss_mb[half[-5:]]) - np.median(self.rss_mb[half[:5]]))
@@ -125,7 +127,7 @@ class SoakResult:
 
 def _account(capture: Path, emulator: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """Per foot: capture bytes vs the emulator's, and packets received + lost vs packets sent."""
-    from device.capture import iter_capture, summarize_capture
+    from device.capture import CaptureMessage, iter_capture, summarize_capture
     from device.framer import DataPacket, Framer
     from device.imu_packets import CounterTracker
 
@@ -135,7 +137,7 @@ def _account(capture: Path, emulator: list[dict[str, Any]]) -> dict[str, dict[st
         framer, tracker = Framer(), CounterTracker()
         received = 0
         for item in iter_capture(capture):
-            if getattr(item, "foot", None) != foot or getattr(item, "direction", None) != "rx":
+            if not isinstance(item, CaptureMessage) or item.foot != foot or item.direction != "rx":
                 continue
             numbers = [f.number for f in framer.feed(item.data) if isinstance(f, DataPacket)]
             if numbers:
