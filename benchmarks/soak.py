@@ -11,7 +11,9 @@
   their last byte and the capture has caught up.
 
 Then it checks, per foot: the capture's device -> host bytes equal the emulator's sent bytes (SHA-256
-of each), and every data packet is accounted for (the unit driver's framer and counter tracker over
+of each; the emulator keeps the hash of every prefix within its last few kB, because a unit may still
+answer footnav's last command after footnav closed the port: those unread bytes must be whole command
+ACKs, and are reported), and every data packet is accounted for (the unit driver's framer and counter tracker over
 the captured bytes: packets received = the emulator's packets less those the fault injector dropped
 or corrupted, and those are counted lost); and reports peak RSS and its slope over the run's second half (flat means the
 slope's change over the run is small against the peak). Nothing is asserted on timings; the figures
@@ -32,9 +34,12 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from device.capture import CaptureSummary
 
 ROOT = Path(__file__).resolve().parents[1]
 FEET = ("left", "right")
@@ -59,18 +64,22 @@ def _serve(seconds: float, pace: float, drop_rate: float, bit_error_rate: float)
     while not all(s.finished.is_set() for s in servers):
         time.sleep(0.2)
     print(json.dumps({"finished": True}), flush=True)
-    sys.stdin.readline()  # footnav has stopped the units (their last ACKs are written) and exited
+    # footnav has stopped the units and exited; the line holds the bytes its capture holds per unit
+    captured = [int(x) for x in sys.stdin.readline().split()[1:]]
     for s in servers:
         s.stop()
+    prefixes = [s.sent_prefix(n) for s, n in zip(servers, captured, strict=True)]
     report = [
         {
             "sha256": s.sent_sha256,
+            "prefix_sha256": None if p is None else p[0],
+            "unread": None if p is None else p[1].hex(),
             "bytes": s.bytes_written,
             "packets_in": s.fault_log.packets_in or s.packets_sent,
             "dropped": len(s.fault_log.dropped),
             "corrupted": len(s.fault_log.corrupted),
         }
-        for s in servers
+        for s, p in zip(servers, prefixes, strict=True)
     ]
     print(json.dumps({"report": report}), flush=True)
     return 0
@@ -125,13 +134,21 @@ class SoakResult:
         return self.footnav_code == 0 and all(f["capture_equals_sent"] and f["accounted"] for f in self.feet.values())
 
 
-def _account(capture: Path, emulator: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+def _only_acks(data: bytes) -> bool:
+    """True if ``data`` is nothing but whole command ACK frames (``A0 cmd chk_hi chk_lo``)."""
+    from device.framer import DeviceAck, Framer
+
+    framer = Framer()
+    frames = framer.feed(data)
+    return framer.buffered == 0 and framer.stats.bytes_skipped == 0 and all(isinstance(f, DeviceAck) for f in frames)
+
+
+def _account(capture: Path, summary: CaptureSummary, emulator: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """Per foot: capture bytes vs the emulator's, and packets received + lost vs packets sent."""
-    from device.capture import CaptureMessage, iter_capture, summarize_capture
+    from device.capture import CaptureMessage, iter_capture
     from device.framer import DataPacket, Framer
     from device.imu_packets import CounterTracker
 
-    summary = summarize_capture(capture, full=True)
     out: dict[str, dict[str, Any]] = {}
     for foot, emu in zip(FEET, emulator, strict=True):
         framer, tracker = Framer(), CounterTracker()
@@ -144,8 +161,14 @@ def _account(capture: Path, emulator: list[dict[str, Any]]) -> dict[str, dict[st
                 _, dup = tracker.update(np.asarray(numbers))
                 received += int(np.count_nonzero(~dup))
         faults = emu["dropped"] + emu["corrupted"]
+        unread = bytes.fromhex(emu["unread"]) if emu["unread"] is not None else None
         out[foot] = {
-            "capture_equals_sent": summary.rx_sha256.get(foot) == emu["sha256"],
+            # every byte the unit sent is in the capture, in order, but for command ACKs the unit
+            # wrote after footnav had closed the port (answers to its last commands)
+            "capture_equals_sent": summary.rx_sha256.get(foot) == emu["prefix_sha256"]
+            and unread is not None
+            and _only_acks(unread),
+            "unread_after_close": len(unread) if unread is not None else -1,
             "bytes": summary.rx_bytes.get(foot, 0),
             "sent_bytes": emu["bytes"],
             "received": received,
@@ -183,6 +206,8 @@ def run_soak(
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     env.pop("DISPLAY", None)
     env.pop("WAYLAND_DISPLAY", None)
+    from device.capture import summarize_capture
+
     emu = subprocess.Popen(
         [sys.executable, "-m", "benchmarks.soak", "_serve", "--seconds", str(minutes * 60.0), "--pace", str(pace),
          "--drop-rate", str(drop_rate), "--bit-error-rate", str(bit_error_rate)],
@@ -211,7 +236,10 @@ def run_soak(
             live.send_signal(signal.SIGINT)
             code = live.wait(120)
         wall = time.monotonic() - t0
-        emu.stdin.write("stop\n")
+        captures = sorted(sessions.glob("*.mcap"))
+        rx = summarize_capture(captures[-1], full=True) if captures else None
+        lengths = [rx.rx_bytes.get(foot, 0) if rx is not None else 0 for foot in FEET]
+        emu.stdin.write("stop " + " ".join(map(str, lengths)) + "\n")
         emu.stdin.flush()
         emulator = json.loads(_readline(emu.stdout, 60.0))["report"]
         emu.wait(60)
@@ -224,10 +252,9 @@ def run_soak(
     np.savetxt(work / "rss.csv", np.column_stack([times, rss]), delimiter=",", header="wall_s,rss_mb", fmt="%.2f")
     if not finished or not finished[0]:
         raise RuntimeError(f"footnav stopped (code {code}) before the emulator finished; see {work}/footnav.stderr")
-    captures = sorted(sessions.glob("*.mcap"))
-    if not captures:
+    if not captures or rx is None:
         raise RuntimeError(f"footnav wrote no capture; see {work}/footnav.stderr")
-    result.feet = _account(captures[-1], emulator)
+    result.feet = _account(captures[-1], rx, emulator)
     result.rrd_mb = rrd.stat().st_size / 1e6 if rrd.exists() else math.nan
     result.capture_mb = captures[-1].stat().st_size / 1e6
     return result
@@ -235,11 +262,14 @@ def run_soak(
 
 def report(r: SoakResult) -> None:
     print(f"soak: two feet at 1 kHz, {r.minutes:g} min of walk, {r.wall_s:.0f} s wall, footnav exit {r.footnav_code}")
-    print(f"{'':<8}{'capture = sent':>16}{'bytes':>14}{'received':>11}{'lost':>7}{'sent':>11}{'faults':>8}")
+    print(
+        f"{'':<8}{'capture = sent':>16}{'bytes':>14}{'unread ACKs':>12}{'received':>11}{'lost':>7}{'sent':>11}"
+        f"{'faults':>8}"
+    )
     for foot, f in r.feet.items():
         print(
-            f"{foot:<8}{'yes' if f['capture_equals_sent'] else 'NO':>16}{f['bytes']:>14}{f['received']:>11}"
-            f"{f['lost']:>7}{f['emulator_packets']:>11}{f['dropped_or_corrupted']:>8}"
+            f"{foot:<8}{'yes' if f['capture_equals_sent'] else 'NO':>16}{f['bytes']:>14}{f['unread_after_close']:>12}"
+            f"{f['received']:>11}{f['lost']:>7}{f['emulator_packets']:>11}{f['dropped_or_corrupted']:>8}"
         )
     print(
         f"peak RSS {r.peak_mb:.0f} MB (target <= 400); second-half slope {r.slope_mb_per_h:+.1f} MB/h, "

@@ -42,6 +42,8 @@ BT_UART_BUDGET_BPS: Final = 11_500.0
 _READ_SIZE: Final = 4096
 _BUDGET_BURST_S: Final = 0.01
 """The link budget's bucket holds this many seconds of bytes (a UART FIFO's worth)."""
+_TAIL_KEEP: Final = 4096
+"""Bytes kept of the end of what was written (see :meth:`PtyShoeServer.sent_prefix`)."""
 
 
 class PtyShoeServer:
@@ -163,6 +165,9 @@ class PtyShoeServer:
         self._inflight_packets = 0
         self._sent = bytearray()
         self._sent_hash = hashlib.sha256()
+        self._head_hash = hashlib.sha256()  # the bytes before the tail
+        self._head_len = 0
+        self._tail = bytearray()  # the last _TAIL_KEEP..2*_TAIL_KEEP bytes written
         self._lock = threading.Lock()
         self._quit = False
         self._closed = False
@@ -190,6 +195,18 @@ class PtyShoeServer:
         """SHA-256 (hex) of every byte written so far (kept with or without ``record``)."""
         with self._lock:
             return self._sent_hash.hexdigest()
+
+    def sent_prefix(self, length: int) -> tuple[str, bytes] | None:
+        """SHA-256 (hex) of the first ``length`` bytes written and the bytes written after them, if
+        ``length`` falls within the last few kB written (else None): what a host that stopped reading
+        after ``length`` bytes got, and what it left unread."""
+        with self._lock:
+            k = length - self._head_len
+            if not 0 <= k <= len(self._tail):
+                return None
+            digest = self._head_hash.copy()
+            digest.update(self._tail[:k])
+            return digest.hexdigest(), bytes(self._tail[k:])
 
     @property
     def stalls(self) -> int:
@@ -356,6 +373,12 @@ class PtyShoeServer:
             self.bytes_written += written
             with self._lock:
                 self._sent_hash.update(view[:written])
+                self._tail += view[:written]
+                if len(self._tail) > 2 * _TAIL_KEEP:
+                    moved = len(self._tail) - _TAIL_KEEP
+                    self._head_hash.update(self._tail[:moved])
+                    self._head_len += moved
+                    del self._tail[:moved]
                 if self._record:
                     self._sent += view[:written]
             if written == len(view):
