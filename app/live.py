@@ -414,6 +414,7 @@ async def live_session(opts: LiveOptions) -> int:
         recording_id=session_id,
         notice=notice,
         dual_runs=feet if dual is not None else (),
+        rrd_footer=False,  # a live session's length is open: its memory must stay flat
     )
     for note in notes:
         print(note, file=sys.stderr)

@@ -43,6 +43,10 @@ APPLICATION_ID = "footnav"
 FLUSH_PERIOD_S = 0.15
 """The viewer is updated about 7 times a second: every flush costs a fixed amount per entity, and at
 0.1 s two feet at 1 kHz took 30.5 % of a core against 28.4 % at 0.15 s (``benchmarks.e2e``)."""
+FILE_FLUSH_PERIOD_S = 2.0
+"""A recording file's logger flushes this often: the ``.rrd`` footer keeps an index entry per chunk in
+memory until the file closes (about 2 kB each; ~14 MB per minute of two feet at 0.15 s flushes, under
+1 MB at 2 s), and larger chunks cost less CPU per sample."""
 MAX_ROWS_PER_SEND = 20_000
 DEFAULT_MAX_QUEUED_SAMPLES = 120_000
 DEFAULT_ELLIPSOID_EVERY = 10

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from pipeline.nav_types import NavBatch
 from views.dual_imu import DualRunView
-from views.logger import RerunLogger
+from views.logger import FILE_FLUSH_PERIOD_S, FLUSH_PERIOD_S, RerunLogger
 from views.paths import DEFAULT_FOOT
 from views.sinks import (
     ViewerStartError,
@@ -176,8 +176,14 @@ def open_session_views(
     notice: Callable[[str], None],
     environ: Mapping[str, str] | None = None,
     dual_runs: Sequence[str] = (),
+    rrd_footer: bool = True,
 ) -> tuple[SessionViews | None, list[str]]:
     """Start a session's outputs and describe them.
+
+    ``rrd_footer=False`` (live sessions, whose length is open): the ``.rrd`` file gets no footer
+    index, which Rerun's file sink keeps in memory until the file closes (about 2.3 MB per minute of
+    two feet at 1 kHz); the file reads like one whose writer was stopped (``RrdReader.stream()``, the
+    viewer), and ``rerun rrd optimize`` adds the index.
 
     - ``web``: host the web viewer on 127.0.0.1 and stream to it (its URL is in the notes);
     - else, a viewer wanted and a display present: spawn the native viewer (127.0.0.1);
@@ -191,7 +197,9 @@ def open_session_views(
     notes: list[str] = []
 
     def logger(sink: rr.GrpcSink | rr.FileSink) -> RerunLogger:
-        return RerunLogger([sink], recording_id=recording_id, feet=feet, dual_runs=dual_runs)
+        # a file needs no live updates; fewer, larger chunks also keep the footer index small
+        flush = FILE_FLUSH_PERIOD_S if isinstance(sink, rr.FileSink) else FLUSH_PERIOD_S
+        return RerunLogger([sink], recording_id=recording_id, feet=feet, dual_runs=dual_runs, flush_period_s=flush)
 
     fallback = False
     if web:
@@ -222,7 +230,8 @@ def open_session_views(
         if problem is not None:
             notes.append(f"{problem}; carrying on without it")
         else:
-            outputs.append(Output("recording file", str(path), logger(rr.FileSink(str(path))), path=path))
+            sink = rr.FileSink(str(path), write_footer=rrd_footer)
+            outputs.append(Output("recording file", str(path), logger(sink), path=path))
             notes.append(f"saving to {path}; view it with `rerun {path}`")
     if not outputs:
         notes.append("Rerun output off (no viewer, no file)")
