@@ -64,6 +64,7 @@ from pipeline.dual_imu_common import (
     sample_ok,
     still_window,
 )
+from pipeline.eskf import inject_attitude_and_reset
 from pipeline.navigator import ZARU_GATE_CHI2_3DOF
 from pipeline.profiles import UnitProfile, get_profile
 from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s, quat_to_mat_into
@@ -183,30 +184,8 @@ def _inject(x: F64, P: F64, dx: F64) -> None:
         x[3 + c] += dx[V0 + c]
     for c in range(12):
         x[10 + c] += dx[BA1 + c]
-    d0, d1, d2 = dx[TH0], dx[TH0 + 1], dx[TH0 + 2]
-    ew, ex, ey, ez = quat_from_rotvec_s(d0, d1, d2)
-    qw, qx, qy, qz = quat_mul_s(ew, ex, ey, ez, x[6], x[7], x[8], x[9])
-    norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-    x[6], x[7], x[8], x[9] = qw / norm, qx / norm, qy / norm, qz / norm
-    # P ← G P Gᵀ, G = I + [δθ/2]× on the attitude block (global error; Solà §7.3.2)
-    h0, h1, h2 = 0.5 * d0, 0.5 * d1, 0.5 * d2
-    n = P.shape[0]
-    for j in range(n):
-        a0, a1, a2 = P[TH0, j], P[TH0 + 1, j], P[TH0 + 2, j]
-        P[TH0, j] = a0 + (-h2 * a1 + h1 * a2)
-        P[TH0 + 1, j] = a1 + (h2 * a0 - h0 * a2)
-        P[TH0 + 2, j] = a2 + (-h1 * a0 + h0 * a1)
-    for i in range(n):
-        a0, a1, a2 = P[i, TH0], P[i, TH0 + 1], P[i, TH0 + 2]
-        P[i, TH0] = a0 + (-h2 * a1 + h1 * a2)
-        P[i, TH0 + 1] = a1 + (h2 * a0 - h0 * a2)
-        P[i, TH0 + 2] = a2 + (-h1 * a0 + h0 * a1)
-    for a in range(3):
-        for b in range(a + 1, 3):
-            mean = 0.5 * (P[TH0 + a, TH0 + b] + P[TH0 + b, TH0 + a])
-            P[TH0 + a, TH0 + b] = mean
-            P[TH0 + b, TH0 + a] = mean
-    for i in range(n):
+    inject_attitude_and_reset(x, P, dx[TH0], dx[TH0 + 1], dx[TH0 + 2])
+    for i in range(P.shape[0]):
         dx[i] = 0.0
 
 

@@ -153,6 +153,39 @@ def _inv3_spd(
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def inject_attitude_and_reset(x: F64, P: F64, dth0: float, dth1: float, dth2: float) -> None:
+    """Inject an attitude error δθ into ``x``'s quaternion (x[6:10], global error: q ← Exp(δθ) q) and
+    reset the covariance ``P`` (n, n), attitude error at rows/columns 6-8, in place.
+
+    Reset: P ← G P Gᵀ with G = I except G[θ,θ] = I + [δθ/2]× for a global attitude error (Solà 2017,
+    §7.3.2; from Exp(δθ⁺) = Exp(δθ) Exp(−δθ̂) to first order): rows θ, then columns θ. Shared by
+    every error-state filter here (this one, ``tof_update``, ``dual_imu_eskf``).
+    """  # pragma: no cover
+    ew, ex, ey, ez = quat_from_rotvec_s(dth0, dth1, dth2)
+    qw, qx, qy, qz = quat_mul_s(ew, ex, ey, ez, x[6], x[7], x[8], x[9])
+    norm = math.sqrt(qw**2 + qx**2 + qy**2 + qz**2)
+    x[6], x[7], x[8], x[9] = qw / norm, qx / norm, qy / norm, qz / norm
+    h0, h1, h2 = 0.5 * dth0, 0.5 * dth1, 0.5 * dth2
+    n = P.shape[0]
+    for j in range(n):
+        a0, a1, a2 = P[TH0, j], P[TH0 + 1, j], P[TH0 + 2, j]
+        P[TH0, j] = a0 + (-h2 * a1 + h1 * a2)
+        P[TH0 + 1, j] = a1 + (h2 * a0 - h0 * a2)
+        P[TH0 + 2, j] = a2 + (-h1 * a0 + h0 * a1)
+    for i in range(n):
+        a0, a1, a2 = P[i, TH0], P[i, TH0 + 1], P[i, TH0 + 2]
+        P[i, TH0] = a0 + (-h2 * a1 + h1 * a2)
+        P[i, TH0 + 1] = a1 + (h2 * a0 - h0 * a2)
+        P[i, TH0 + 2] = a2 + (-h1 * a0 + h0 * a1)
+    # outside the θθ block the two sides agree exactly; inside it, average them
+    for a in range(3):
+        for b in range(a + 1, 3):
+            m = 0.5 * (P[TH0 + a, TH0 + b] + P[TH0 + b, TH0 + a])
+            P[TH0 + a, TH0 + b] = m
+            P[TH0 + b, TH0 + a] = m
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _nis3(P: F64, s0: int, y0: float, y1: float, y2: float, r: float) -> float:
     """Normalised innovation squared yᵀ S⁻¹ y, S = P[s0:s0+3, s0:s0+3] + r I."""  # pragma: no cover
     i00, i01, i02, i11, i12, i22 = _inv3_spd(
@@ -215,30 +248,7 @@ def _update3(x: F64, P: F64, s0: int, y: F64, r: float, work: F64) -> None:
         x[3 + r3] += work[9, V0 + r3]
         x[10 + r3] += work[9, BA0 + r3]
         x[13 + r3] += work[9, BG0 + r3]
-    dth0, dth1, dth2 = work[9, TH0], work[9, TH0 + 1], work[9, TH0 + 2]
-    ew, ex, ey, ez = quat_from_rotvec_s(dth0, dth1, dth2)
-    qw, qx, qy, qz = quat_mul_s(ew, ex, ey, ez, x[6], x[7], x[8], x[9])
-    norm = math.sqrt(qw**2 + qx**2 + qy**2 + qz**2)
-    x[6], x[7], x[8], x[9] = qw / norm, qx / norm, qy / norm, qz / norm
-    # reset: P ← G P Gᵀ with G = I except G[θ,θ] = I + [δθ/2]× for a global attitude error
-    # (Solà §7.3.2; from Exp(δθ⁺) = Exp(δθ) Exp(−δθ̂) to first order). Rows θ, then columns θ.
-    h0, h1, h2 = 0.5 * dth0, 0.5 * dth1, 0.5 * dth2
-    for j in range(N_STATE):
-        a0, a1, a2 = P[TH0, j], P[TH0 + 1, j], P[TH0 + 2, j]
-        P[TH0, j] = a0 + (-h2 * a1 + h1 * a2)
-        P[TH0 + 1, j] = a1 + (h2 * a0 - h0 * a2)
-        P[TH0 + 2, j] = a2 + (-h1 * a0 + h0 * a1)
-    for i in range(N_STATE):
-        a0, a1, a2 = P[i, TH0], P[i, TH0 + 1], P[i, TH0 + 2]
-        P[i, TH0] = a0 + (-h2 * a1 + h1 * a2)
-        P[i, TH0 + 1] = a1 + (h2 * a0 - h0 * a2)
-        P[i, TH0 + 2] = a2 + (-h1 * a0 + h0 * a1)
-    # outside the θθ block the two sides agree exactly; inside it, average them
-    for a in range(3):
-        for b in range(a + 1, 3):
-            m = 0.5 * (P[TH0 + a, TH0 + b] + P[TH0 + b, TH0 + a])
-            P[TH0 + a, TH0 + b] = m
-            P[TH0 + b, TH0 + a] = m
+    inject_attitude_and_reset(x, P, work[9, TH0], work[9, TH0 + 1], work[9, TH0 + 2])
 
 
 _POS_YAW = (P0, P0 + 1, P0 + 2, TH0 + 2)  # error-state indices of x, y, z and the heading

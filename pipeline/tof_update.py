@@ -37,8 +37,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pipeline.eskf import N_STATE, TH0
-from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s
+from pipeline.eskf import N_STATE, TH0, inject_attitude_and_reset
 
 F64 = NDArray[np.float64]
 
@@ -142,25 +141,4 @@ def tof_update(
         x[3 + r3] += u[3 + r3] / s * y
         x[10 + r3] += u[9 + r3] / s * y
         x[13 + r3] += u[12 + r3] / s * y
-    dth0, dth1, dth2 = u[TH0] / s * y, u[TH0 + 1] / s * y, u[TH0 + 2] / s * y
-    ew, ex, ey, ez = quat_from_rotvec_s(dth0, dth1, dth2)
-    qw, qx, qy, qz = quat_mul_s(ew, ex, ey, ez, x[6], x[7], x[8], x[9])
-    norm = math.sqrt(qw**2 + qx**2 + qy**2 + qz**2)
-    x[6], x[7], x[8], x[9] = qw / norm, qx / norm, qy / norm, qz / norm
-    # reset: P ← G P Gᵀ, G = I except G[θ,θ] = I + [δθ/2]× (global attitude error, Solà §7.3.2)
-    h0, h1, h2 = 0.5 * dth0, 0.5 * dth1, 0.5 * dth2
-    for j in range(N_STATE):
-        a0, a1, a2 = P[TH0, j], P[TH0 + 1, j], P[TH0 + 2, j]
-        P[TH0, j] = a0 + (-h2 * a1 + h1 * a2)
-        P[TH0 + 1, j] = a1 + (h2 * a0 - h0 * a2)
-        P[TH0 + 2, j] = a2 + (-h1 * a0 + h0 * a1)
-    for i in range(N_STATE):
-        a0, a1, a2 = P[i, TH0], P[i, TH0 + 1], P[i, TH0 + 2]
-        P[i, TH0] = a0 + (-h2 * a1 + h1 * a2)
-        P[i, TH0 + 1] = a1 + (h2 * a0 - h0 * a2)
-        P[i, TH0 + 2] = a2 + (-h1 * a0 + h0 * a1)
-    for a in range(3):
-        for b in range(a + 1, 3):
-            m = 0.5 * (P[TH0 + a, TH0 + b] + P[TH0 + b, TH0 + a])
-            P[TH0 + a, TH0 + b] = m
-            P[TH0 + b, TH0 + a] = m
+    inject_attitude_and_reset(x, P, u[TH0] / s * y, u[TH0 + 1] / s * y, u[TH0 + 2] / s * y)
