@@ -45,7 +45,7 @@ from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
 from mcap.records import Channel, Header, Message, Metadata
 from mcap.stream_reader import StreamReader
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType, IndexType, Writer
 
 from pipeline.errors import InputFormatError
 
@@ -143,7 +143,14 @@ class CaptureWriter:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file: IO[bytes] = open(self.path, "xb")  # noqa: SIM115 - closed in close()
-        self._writer = Writer(self._file, compression=CompressionType.ZSTD, chunk_size=1 << 20)
+        # no per-chunk message indexes: the writer keeps every chunk's index in memory until the
+        # file closes, and a session's length is open (readers scan chunks; the statistics stay)
+        self._writer = Writer(
+            self._file,
+            compression=CompressionType.ZSTD,
+            chunk_size=1 << 20,
+            index_types=IndexType.CHUNK | IndexType.METADATA,
+        )
         self._lock = threading.Lock()
         self._channels: dict[tuple[str, str], int] = {}
         self._sequence = 0
