@@ -48,7 +48,9 @@ FILE_FLUSH_PERIOD_S = 2.0
 memory until the file closes (about 2 kB each; ~14 MB per minute of two feet at 0.15 s flushes, under
 1 MB at 2 s), and larger chunks cost less CPU per sample."""
 MAX_ROWS_PER_SEND = 20_000
-DEFAULT_MAX_QUEUED_SAMPLES = 120_000
+DEFAULT_MAX_QUEUED_SAMPLES = 60_000
+"""Samples a logger may hold (about 330 bytes each): 30 s of two feet at 1 kHz behind a stalled viewer
+before samples are dropped (and counted); a replay waits for room instead."""
 DEFAULT_ELLIPSOID_EVERY = 10
 """Ellipsoid decimation: 100 Hz at 1 kHz, visually the same, ~25 % smaller files than every sample."""
 CLOSE_TIMEOUT_S = 10.0
