@@ -271,7 +271,16 @@ def run_demo(opts: DemoOptions) -> int:
             run.sinks.append(dual_view_sink(run.navigator, views, run.foot))
         if capture is not None:
             run.tap = capture.add_unit(
-                unit_header(run.foot, run.port, "pty (emulator)", cfg, 0, extensions=opts.tof, stance=opts.stance)
+                unit_header(
+                    run.foot,
+                    run.port,
+                    "pty (emulator)",
+                    cfg,
+                    0,
+                    extensions=opts.tof,
+                    stance=opts.stance,
+                    dual_imu_lever_b_m=lever if opts.dual_imu else None,
+                )
             )
     server_of = dict(zip(feet, servers, strict=True))
 

@@ -105,9 +105,12 @@ def unit_header(
     *,
     extensions: bool = False,
     stance: str = "inertial",
+    dual_imu_lever_b_m: tuple[float, float, float] | None = None,
 ) -> UnitHeader:
     """The capture header of one unit; ``extensions``: the ToF and barometer states were switched on
-    (a replay then repeats that handshake); ``stance``: the ToF units' stance detector mode."""
+    (a replay then repeats that handshake); ``stance``: the ToF units' stance detector mode;
+    ``dual_imu_lever_b_m``: a dual-IMU board streaming raw 0x28 with that lever arm."""
+    dual = {} if dual_imu_lever_b_m is None else {"dual_imu_lever_b_m": list(dual_imu_lever_b_m)}
     return UnitHeader(
         foot=foot,
         unit=UNIT_KIND,
@@ -115,12 +118,13 @@ def unit_header(
         transport=transport,
         port=port,
         settings={
-            "mode": "normal_imu",
+            "mode": "normal_imu" if dual_imu_lever_b_m is None else "dual_imu_raw",
             "rate_divider_log2": rate_divider_log2,
             "rate_hz": BASE_RATE_HZ / 2**rate_divider_log2,
             "nav_config": config.to_json(),
             "extensions": extensions,
             "stance": stance,
+            **dual,
         },
         calibration={
             "on_unit": "factory calibration applied by the unit (calibrated output 0x40)",
@@ -439,7 +443,14 @@ async def live_session(opts: LiveOptions) -> int:
             transport = addresses[run.foot].transport
             run.tap = capture.add_unit(
                 unit_header(
-                    run.foot, run.port, transport, cfg, run.rate_divider_log2, extensions=opts.tof, stance=opts.stance
+                    run.foot,
+                    run.port,
+                    transport,
+                    cfg,
+                    run.rate_divider_log2,
+                    extensions=opts.tof,
+                    stance=opts.stance,
+                    dual_imu_lever_b_m=dual,
                 )
             )
 

@@ -22,11 +22,13 @@ from pathlib import Path
 
 from app.calibration_store import StoredCalibration, calibration_dir, load_calibration
 from app.config import Config, apply_capture_settings
-from app.live import FootRun, foot_sinks, notice, tof_config
+from app.live import FootRun, dual_nav_config, dual_view_sink, foot_sinks, notice, tof_config
 from app.session import CalibrationLookup, run_unit_session
 from app.status import Progress, StatusLine
 from device.capture import EXPECTED, CaptureReplayLink, summarize_capture
-from device.unit import OpenShoeUnit
+from device.raw_imu import DUAL_IMU_MASK
+from device.unit import OpenShoeUnit, RawImuMode
+from pipeline.dual_navigator import DualNavigator
 from pipeline.errors import InputFormatError
 from pipeline.navigator import Navigator
 from pipeline.runner import NavSink
@@ -133,6 +135,11 @@ def run_replay(opts: ReplayOptions) -> int:
         + (f", window {opts.start_s:g}-{opts.end_s:g} s" if windowed else ""),
         file=sys.stderr,
     )
+    lever_of = {
+        u.foot: tuple(float(v) for v in u.settings["dual_imu_lever_b_m"])
+        for u in info.units
+        if isinstance(u.settings.get("dual_imu_lever_b_m"), list)
+    }
     views, notes = open_session_views(
         save=opts.save,
         want_viewer=opts.viewer,
@@ -140,6 +147,7 @@ def run_replay(opts: ReplayOptions) -> int:
         feet=feet,
         recording_id=str(info.session.get("session_id", opts.path.stem)),
         notice=notice,
+        dual_runs=tuple(lever_of),
     )
     for note in notes:
         print(note, file=sys.stderr)
@@ -152,9 +160,17 @@ def run_replay(opts: ReplayOptions) -> int:
     links: dict[str, CaptureReplayLink] = {}
     for k, foot in enumerate(feet):
         recorded = info.units[feet.index(foot)].settings.get("stance", "inertial")
-        tof = tof_config(opts.stance or str(recorded))
-        run = FootRun(foot, opts.path.name, Navigator(nav_config, rate_hz=rate_of.get(foot, 1000.0), tof=tof))
+        rate_hz = rate_of.get(foot, 1000.0)
+        navigator: Navigator | DualNavigator
+        if foot in lever_of:  # a dual-IMU board: its raw two-IMU stream to the dual-IMU navigator
+            lever = lever_of[foot]
+            navigator = DualNavigator(dual_nav_config(nav_config, (lever[0], lever[1], lever[2])), rate_hz=rate_hz)
+        else:
+            navigator = Navigator(nav_config, rate_hz=rate_hz, tof=tof_config(opts.stance or str(recorded)))
+        run = FootRun(foot, opts.path.name, navigator)
         foot_sinks(run, views, status, two_feet=len(feet) > 1, put_timeout_s=0.0 if realtime else REPLAY_PUT_TIMEOUT_S)
+        if views is not None and isinstance(navigator, DualNavigator):
+            run.sinks.append(dual_view_sink(navigator, views, foot))
         if opts.collect is not None:
             run.sinks.append(opts.collect(foot))
         links[foot] = CaptureReplayLink(
@@ -212,6 +228,7 @@ def run_replay(opts: ReplayOptions) -> int:
             calibration=lookup(run.foot),
             extensions=bool(settings.get("extensions", False)),
             use_ranges=opts.tof,
+            mode=RawImuMode(imu_mask=DUAL_IMU_MASK, rate_divider_log2=rate_divider) if run.foot in lever_of else None,
         )
 
     from app.live import run_feet
