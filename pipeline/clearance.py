@@ -95,10 +95,14 @@ class StrideClearanceTracker:
     def _finish(self, t_end: float, out_t: list[float], out_min: list[float], out_max: list[float]) -> None:
         t = np.concatenate(self._t)
         c = np.concatenate(self._c)
-        if t[-1] - t[0] < MIN_SWING_S:
+        finite = np.isfinite(t) & np.isfinite(c)  # bad samples (flagged upstream) say nothing here
+        t, c = t[finite], c[finite]
+        if t.size == 0 or not t[-1] - t[0] >= MIN_SWING_S:
             return
         lo, hi = t[0] + 0.25 * (t[-1] - t[0]), t[0] + 0.75 * (t[-1] - t[0])
         mid = (t >= lo) & (t <= hi)
+        if not mid.any():
+            return
         out_t.append(t_end)
         out_min.append(float(np.min(c[mid])))
         out_max.append(float(np.max(c)))

@@ -69,14 +69,7 @@ def load_pyshoe_mat(path: Path) -> Recording:
     Fields ``ts`` (1×n, s), ``imu`` (n×6: m/s², rad/s), ``gt`` (n×3, m). The motion-capture frame is
     left-handed (north, east, up), so y is negated here to make it right-handed z-up.
     """
-    from scipy.io import loadmat
-
-    try:
-        mat = loadmat(str(path))
-    except Exception as exc:  # scipy raises many kinds on a corrupt file
-        raise InputFormatError(
-            f"{path}: not a MATLAB .mat file readable as a PyShoe trial ({type(exc).__name__}: {exc})"
-        ) from None
+    mat = _loadmat_isolated(path)
     missing = [k for k in ("ts", "imu") if k not in mat]
     if missing:
         raise InputFormatError(
@@ -110,6 +103,38 @@ def load_pyshoe_mat(path: Path) -> Recording:
         gt_pos_m=gt,
         notes=notes,
     )
+
+
+def _loadmat(path: str) -> dict[str, object]:
+    from scipy.io import loadmat
+
+    return {k: v for k, v in loadmat(path).items() if not k.startswith("__")}
+
+
+def _loadmat_isolated(path: Path) -> dict[str, object]:
+    """``scipy.io.loadmat`` in a child process: its C reader can crash the process on a corrupt file (a
+    segmentation fault, found by fuzzing), which must be an error message, not a crash. The child
+    comes from a fork server (one clean process, started once, with scipy preloaded), so a load costs
+    a fork, and forking this possibly multi-threaded process is avoided.
+
+    Raises:
+        InputFormatError: the file is not readable as a MATLAB .mat file, or crashed the reader.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    try:
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(["pipeline.loaders", "scipy.io"])
+        with ProcessPoolExecutor(1, mp_context=ctx) as pool:
+            return pool.submit(_loadmat, str(path)).result()
+    except BrokenProcessPool:
+        raise InputFormatError(f"{path}: corrupt .mat file (it crashed the MATLAB reader)") from None
+    except Exception as exc:  # scipy raises many kinds on a corrupt file
+        raise InputFormatError(
+            f"{path}: not a MATLAB .mat file readable as a PyShoe trial ({type(exc).__name__}: {exc})"
+        ) from None
 
 
 def _mat_f64(mat: dict[str, object], name: str, path: Path) -> F64:

@@ -10,6 +10,7 @@ before the first quiet period cannot be navigated and are counted, not guessed.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -181,6 +182,7 @@ class Navigator:
         if len(batch) == 0:
             return None
         self.stats.samples_in += len(batch)
+        batch = implausible_to_nan(batch)
         stat, threshold, still = self.detector.update(batch.acc_b_mps2, batch.gyr_b_radps)
         if self.height_detector is not None:
             still = self.height_detector.update(batch.t_s, batch.acc_b_mps2, batch.gyr_b_radps, still)
@@ -380,6 +382,27 @@ def nav_batch(
         strides=strides,
         altitude=altitude,
     )
+
+
+MAX_ABS_ACC_MPS2 = 2000.0
+"""|specific force| no foot IMU can report (about 200 g: full scales are ±16-18 g, e.g. MPU-6500,
+ADIS16367, 3DM-GX3 datasheets); a larger value is a corrupt sample."""
+MAX_ABS_GYR_RADPS = 100.0
+"""|angular rate| no foot IMU can report (about 5700 °/s: full scales are ±1200-2000 °/s)."""
+
+
+def implausible_to_nan(batch: ImuBatch) -> ImuBatch:
+    """``batch`` with samples no sensor can report (corrupt records: a flipped exponent bit) set to
+    NaN, so the detector and the filter skip and count them as bad samples instead of integrating
+    them (the same object when there are none)."""
+    bad = (np.abs(batch.acc_b_mps2) > MAX_ABS_ACC_MPS2).any(axis=1) | (
+        np.abs(batch.gyr_b_radps) > MAX_ABS_GYR_RADPS
+    ).any(axis=1)
+    if not bad.any():
+        return batch
+    acc, gyr = batch.acc_b_mps2.copy(), batch.gyr_b_radps.copy()
+    acc[bad], gyr[bad] = np.nan, np.nan
+    return dataclasses.replace(batch, acc_b_mps2=acc, gyr_b_radps=gyr)
 
 
 def _first_run(mask: NDArray[np.bool_], length: int) -> int:

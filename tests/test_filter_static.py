@@ -83,6 +83,17 @@ def test_nan_samples_are_flagged_not_fatal() -> None:
     assert np.abs(out.pos_n_m[-1]).max() < 1e-3
 
 
+def test_impossible_samples_are_flagged_not_integrated() -> None:
+    """A corrupt record (e.g. a flipped exponent bit: 1e30 m/s²) is a bad sample, not a number to integrate."""
+    t, acc, gyr = _still(5000, 0.0, 0.0, np.zeros(3))
+    acc[3000, 1] = 3.0e30
+    gyr[3500, 2] = -7.0e12
+    out, stats = navigate(t, acc, gyr, RATE_HZ)
+    assert out is not None and stats.bad_samples == 2
+    assert np.isfinite(out.pos_n_m).all()
+    assert np.abs(out.pos_n_m[-1]).max() < 1e-3
+
+
 def test_duplicate_and_gapped_timestamps_are_counted() -> None:
     t, acc, gyr = _still(5000, 0.0, 0.0, np.zeros(3))
     t[2000] = t[1999]  # duplicate
