@@ -33,7 +33,7 @@ from device.emulator.imu_errors import corrupt
 from pipeline import eskf
 from pipeline.alignment import align_from_still
 from pipeline.detectors import StreamingDetector
-from pipeline.navigator import NavConfig, Navigator, filter_parameters, navigate
+from pipeline.navigator import NavConfig, Navigator, filter_parameters, initial_error_sigmas, navigate
 from pipeline.samples import ImuBatch
 
 RATE_HZ = 1000.0
@@ -159,10 +159,7 @@ def main(argv: list[str] | None = None) -> int:
     al = align_from_still(acc[:500], gyr[:500])
     x0 = np.zeros(16)
     x0[6:10] = al.quat_nb_wxyz
-    sig = [cfg.init_pos_sigma_m] * 3 + [cfg.init_vel_sigma_mps] * 3
-    sig += [cfg.init_tilt_sigma_rad] * 2 + [cfg.init_yaw_sigma_rad]
-    sig += [cfg.profile.acc_bias_init_mps2] * 3 + [cfg.profile.gyr_bias_init_radps] * 3
-    P0 = np.diag(np.square(sig))
+    P0 = np.diag(np.square(initial_error_sigmas(cfg, cfg.profile)))
     par = filter_parameters(cfg.profile, RATE_HZ, al.gravity_mps2, cfg.dt_max_s)
     dt = np.diff(t, prepend=t[0] - 1.0 / RATE_HZ)
 

@@ -64,8 +64,8 @@ from pipeline.dual_imu_common import (
     sample_ok,
     still_window,
 )
-from pipeline.eskf import inject_attitude_and_reset
-from pipeline.navigator import ZARU_GATE_CHI2_3DOF
+from pipeline.eskf import inject_attitude_and_reset, sample_intervals
+from pipeline.navigator import DEFAULT_DT_MAX_S, ZARU_GATE_CHI2_3DOF, initial_error_sigmas
 from pipeline.profiles import UnitProfile, get_profile
 from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s, quat_to_mat_into
 
@@ -133,10 +133,12 @@ class DualEskfConfig:
         profile: noise model of one IMU (both are the same part).
         align_s: still time at the start of the record used for the alignment, s.
         init_pos_sigma_m, init_vel_sigma_mps, init_tilt_sigma_rad, init_yaw_sigma_rad: initial 1σ.
+        dt_max_s: longer intervals are gaps, integrated as this long (``eskf.sample_intervals``), s.
     """
 
     profile: UnitProfile = field(default_factory=lambda: get_profile("generic"))
     align_s: float = 1.0
+    dt_max_s: float = DEFAULT_DT_MAX_S
     init_pos_sigma_m: float = 1e-5
     init_vel_sigma_mps: float = 0.01
     init_tilt_sigma_rad: float = math.radians(0.5)
@@ -467,7 +469,7 @@ def run_dual_eskf(
     gyr = np.ascontiguousarray(gyr_b_radps, dtype=np.float64)
     window = still_window(acc, gyr, rate_hz, cfg.align_s)
     stream = DualEskfStream(cfg, lever_b_m, rate_hz, acc[window], gyr[window])
-    dt = np.diff(t_s, prepend=t_s[0] - 1.0 / rate_hz)
+    dt = sample_intervals(t_s, t_s[0] - 1.0 / rate_hz, cfg.dt_max_s)
     return stream.step(t_s, acc, gyr, stance, dt)
 
 
@@ -492,17 +494,7 @@ class DualEskfStream:
         R = np.empty((3, 3))
         quat_to_mat_into(x[6], x[7], x[8], x[9], R)
         x[0:3] = 0.5 * (R @ self.lever_b_m)  # the midpoint; IMU 1 starts at the origin
-        sig = np.concatenate(
-            [
-                np.full(3, cfg.init_pos_sigma_m),
-                np.full(3, cfg.init_vel_sigma_mps),
-                [cfg.init_tilt_sigma_rad, cfg.init_tilt_sigma_rad, cfg.init_yaw_sigma_rad],
-                np.full(3, prof.acc_bias_init_mps2),
-                np.full(3, prof.gyr_bias_init_radps),
-                np.full(3, prof.acc_bias_init_mps2),
-                np.full(3, prof.gyr_bias_init_radps),
-            ]
-        )
+        sig = initial_error_sigmas(cfg, prof, imus=2)
         self.x = x
         self.P = np.diag(sig**2)
         self.aux = np.zeros(N_AUX)

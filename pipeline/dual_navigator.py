@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from pipeline.detectors import DetectorParams, StreamingDetector
 from pipeline.dual_imu_common import ACC_FULL_SCALE_MPS2, GYR_FULL_SCALE_RADPS
 from pipeline.dual_imu_eskf import DualEskfConfig, DualEskfStream, DualEskfTrack
+from pipeline.eskf import sample_intervals
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavStats
 
@@ -165,7 +166,7 @@ class DualNavigator:
         still: NDArray[np.bool_],
     ) -> NavBatch:
         assert self.filter is not None
-        dt = np.diff(t, prepend=self._t_last)
+        dt = sample_intervals(t, self._t_last, self.config.filter.dt_max_s)
         self._t_last = float(t[-1])
         track = self.filter.step(t, acc, gyr, still, dt)
         self.last_track = track

@@ -172,3 +172,20 @@ def test_lever_arm_check_leaves_out_dropped_and_saturated_samples() -> None:
     check = check_lever_arm(acc, gyr, stance, LEVER, 1000.0, sigma_acc_mps2=sigma)
     assert check.consistent and "agrees" in check.message
     np.testing.assert_allclose(check.estimated_b_m, LEVER, atol=5e-4)
+
+
+def test_footnav_dual_integrates_a_corrupt_time_stamp_gap_as_dt_max() -> None:
+    """A time stamp years ahead is a gap: integrated over dt_max, not over the years (as the single-IMU
+    navigator does, ``eskf.sample_intervals``)."""
+    rec = simulate_dual_imu("rectangle", seed=2)
+    _, _, stance = StreamingDetector(DetectorParams(), 1000.0).update(
+        rec.acc_b_mps2[:, 0].copy(), rec.gyr_b_radps[:, 0].copy()
+    )
+    clean = run_dual_eskf(rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, stance, LEVER, 1000.0)
+    t = rec.t_s.copy()
+    t[20_000:] += 3.0e7  # a corrupt stamp: the rest of the walk a year later
+    gapped = run_dual_eskf(t, rec.acc_b_mps2, rec.gyr_b_radps, stance, LEVER, 1000.0)
+    assert np.isfinite(gapped.pos1_n_m).all()
+    # one mid-swing interval of 50 ms instead of 1 ms costs decimetres, not the 1e16 m of integrating
+    # the year (measured 0.83 m largest offset, then held by the zero-velocity updates)
+    assert np.max(np.linalg.norm(gapped.pos1_n_m - clean.pos1_n_m, axis=1)) < 2.0
