@@ -71,7 +71,6 @@ def _serve(seconds: float, pace: float, drop_rate: float, bit_error_rate: float)
     prefixes = [s.sent_prefix(n) for s, n in zip(servers, captured, strict=True)]
     report = [
         {
-            "sha256": s.sent_sha256,
             "prefix_sha256": None if p is None else p[0],
             "unread": None if p is None else p[1].hex(),
             "bytes": s.bytes_written,

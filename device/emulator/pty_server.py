@@ -164,7 +164,6 @@ class PtyShoeServer:
         self._inflight: memoryview | None = None
         self._inflight_packets = 0
         self._sent = bytearray()
-        self._sent_hash = hashlib.sha256()
         self._head_hash = hashlib.sha256()  # the bytes before the tail
         self._head_len = 0
         self._tail = bytearray()  # the last _TAIL_KEEP..2*_TAIL_KEEP bytes written
@@ -189,12 +188,6 @@ class PtyShoeServer:
     def fault_log(self) -> FaultLog:
         """What the fault injector did so far (empty without ``faults``); read it once stopped."""
         return self._injector.log if self._injector is not None else FaultLog()
-
-    @property
-    def sent_sha256(self) -> str:
-        """SHA-256 (hex) of every byte written so far (kept with or without ``record``)."""
-        with self._lock:
-            return self._sent_hash.hexdigest()
 
     def sent_prefix(self, length: int) -> tuple[str, bytes] | None:
         """SHA-256 (hex) of the first ``length`` bytes written and the bytes written after them, if
@@ -372,7 +365,6 @@ class PtyShoeServer:
                 self._tokens -= written
             self.bytes_written += written
             with self._lock:
-                self._sent_hash.update(view[:written])
                 self._tail += view[:written]
                 if len(self._tail) > 2 * _TAIL_KEEP:
                     moved = len(self._tail) - _TAIL_KEEP
