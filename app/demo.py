@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from app import heap
 from app.config import DEFAULT, Config, defaults
 from app.live import (
     FOOT_START_OFFSET_M,
@@ -43,7 +44,7 @@ from app.live import (
     tof_config,
     unit_header,
 )
-from app.session import SerialSessionResult, run_serial_session
+from app.session import SerialSessionResult, UnitAddress, run_device_session
 from app.status import StatusLine
 from device.emulator.dual_imu import DEFAULT_LEVER_B_M, rigid_board
 from device.emulator.floors import floor_of
@@ -205,6 +206,7 @@ def run_demo(opts: DemoOptions) -> int:
     if opts.config is None or cfg.source("unit.profile") == DEFAULT:
         cfg.set("unit.profile", PROFILE_OF_GRADE[opts.grade], f"demo (grade {opts.grade})")
     session_id = new_session_id("demo")
+    heap.limit_arenas()  # before the viewer's and the capture's threads start
     views, notes = open_session_views(
         save=opts.save,
         want_viewer=opts.viewer,
@@ -286,8 +288,8 @@ def run_demo(opts: DemoOptions) -> int:
 
     async def session(run: FootRun) -> None:
         server = server_of[run.foot]
-        await run_serial_session(
-            server.port,
+        await run_device_session(
+            UnitAddress("serial", server.port),
             run.navigator,
             run.sinks,
             expect_samples=truth.t_s.size,

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
+from app import heap
 from app.calibration_store import StoredCalibration, any_calibrations, calibration_dir, load_calibration
 from app.config import DEFAULT, Config
 from app.session import CalibrationLookup, LinkHealth, SerialSessionResult, UnitAddress, run_device_session
@@ -296,7 +297,11 @@ async def run_feet(runs: Sequence[FootRun], session: Callable[[FootRun], Awaitab
             if len(runs) > 1:
                 notice(f"{run.foot} foot stopped: {exc}")
 
-    await asyncio.gather(*(one(r) for r in runs))
+    trimmer = asyncio.create_task(heap.trim_periodically())
+    try:
+        await asyncio.gather(*(one(r) for r in runs))
+    finally:
+        trimmer.cancel()
     errors = [r.error for r in runs if r.error is not None]
     if errors and len(errors) == len(runs):
         raise errors[0] if isinstance(errors[0], FootnavError) else DeviceError(str(errors[0]))
@@ -410,6 +415,7 @@ async def live_session(opts: LiveOptions) -> int:
     dual = opts.dual_imu_lever_b_m
     if dual is not None and opts.tof:
         raise FootnavError("a unit is either a dual-IMU board or a ToF unit: give --dual-imu or --tof, not both")
+    heap.limit_arenas()  # before the viewer's and the capture's threads start
     views, notes = open_session_views(
         save=opts.save,
         want_viewer=opts.viewer,
