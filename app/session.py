@@ -323,44 +323,6 @@ async def _imu_and_readings(unit: OpenShoeUnit) -> AsyncGenerator[ImuBatch | Tof
                 yield batch
 
 
-async def run_serial_session(
-    port: str,
-    navigator: BatchNavigator[Any],
-    sinks: Sequence[NavSink],
-    *,
-    rate_divider_log2: int = 0,
-    expect_samples: int | None = None,
-    source_done: Callable[[], bool] = lambda: False,
-    on_idle: Callable[[float], None] | None = None,
-    status: StatusLine | FootStatus | None = None,
-    result: SerialSessionResult | None = None,
-    capture: CaptureTap | None = None,
-    on_open: Callable[[OpenShoeUnit], None] | None = None,
-    on_link_event: Callable[[LinkEvent], None] | None = None,
-    calibration: CalibrationLookup | None = None,
-    mode: Mode | None = None,
-    extensions: bool = False,
-) -> SerialSessionResult:
-    """:func:`run_device_session` on the serial port ``port``."""
-    return await run_device_session(
-        UnitAddress("serial", port),
-        navigator,
-        sinks,
-        rate_divider_log2=rate_divider_log2,
-        expect_samples=expect_samples,
-        source_done=source_done,
-        on_idle=on_idle,
-        status=status,
-        result=result,
-        capture=capture,
-        on_open=on_open,
-        on_link_event=on_link_event,
-        calibration=calibration,
-        mode=mode,
-        extensions=extensions,
-    )
-
-
 async def run_device_session(
     address: UnitAddress,
     navigator: BatchNavigator[Any],
@@ -445,7 +407,7 @@ async def run_unit_session(
     extensions: bool = False,
     use_ranges: bool = True,
 ) -> SerialSessionResult:
-    """Navigate an open unit's stream (see :func:`run_serial_session`); ``start=False`` for a replay,
+    """Navigate an open unit's stream (see :func:`run_device_session`); ``start=False`` for a replay,
     where the captured bytes already hold the start and no stop is sent; ``idle_notice_s=None`` never
     treats a pause as idle (replays); ``window``: see ``_session_samples``; ``calibration``: ask the
     unit its MCU id before the start and apply its calibration file (a replay passes one only when the

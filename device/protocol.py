@@ -409,10 +409,10 @@ def _make(command_set: CommandSet, name: str, cmd_id: int, payload: bytes = b"")
     return OutgoingCommand(command_set, cmd_id, payload, name)
 
 
-class Commands2015:
-    """Builders for the 2015 command set (openshoe-framework HEAD), protocol-openshoe.md section 3.2."""
+class _CommandsCommon:
+    """The builders both command sets share (same IDs, same bytes)."""
 
-    command_set: Final = CommandSet.V2015
+    command_set: CommandSet
 
     def _cmd(self, name: str, cmd_id: int, payload: bytes = b"") -> OutgoingCommand:
         return _make(self.command_set, name, cmd_id, payload)
@@ -428,6 +428,12 @@ class Commands2015:
     def mcu_id(self) -> OutgoingCommand:
         """``04 00 04``: the unit answers with one packet holding its 15-byte MCU serial number."""
         return self._cmd("mcu id", CMD_MCU_ID)
+
+
+class Commands2015(_CommandsCommon):
+    """Builders for the 2015 command set (openshoe-framework HEAD), protocol-openshoe.md section 3.2."""
+
+    command_set = CommandSet.V2015
 
     def outputs_off(self) -> OutgoingCommand:
         """``22 00 22``: all outputs off; empties the TX queue."""
@@ -511,25 +517,10 @@ class Commands2015:
         return self._cmd("set state", cmd_id, bytes((state_id & 0xFF,)) + value)
 
 
-class Commands2014:
+class Commands2014(_CommandsCommon):
     """Builders for the 2014 MIMU22BT set (commit 1824d70), protocol-openshoe.md section 3.3."""
 
-    command_set: Final = CommandSet.V2014
-
-    def _cmd(self, name: str, cmd_id: int, payload: bytes = b"") -> OutgoingCommand:
-        return _make(self.command_set, name, cmd_id, payload)
-
-    def ack(self, pkt_number: int) -> OutgoingCommand:
-        """``01 hi lo chk``: host ACK of a data packet (same bytes as in the 2015 set)."""
-        return self._cmd("ack", CMD_ACK, (pkt_number & 0xFFFF).to_bytes(2, "big"))
-
-    def ping(self) -> OutgoingCommand:
-        """``03 00 03`` -> ``A0 03 00 A3``."""
-        return self._cmd("ping", CMD_PING)
-
-    def mcu_id(self) -> OutgoingCommand:
-        """``04 00 04``."""
-        return self._cmd("mcu id", CMD_MCU_ID)
+    command_set = CommandSet.V2014
 
     def outputs_off(self) -> OutgoingCommand:
         """``21 00 21`` (in the 2015 set 0x21 is OUTPUT_MULTIPLE_STATES: never send it there)."""
