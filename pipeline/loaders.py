@@ -105,31 +105,18 @@ def load_pyshoe_mat(path: Path) -> Recording:
     )
 
 
-def _loadmat(path: str) -> dict[str, object]:
-    from scipy.io import loadmat
-
-    return {k: v for k, v in loadmat(path).items() if not k.startswith("__")}
-
-
 def _loadmat_isolated(path: Path) -> dict[str, object]:
-    """``scipy.io.loadmat`` in a child process: its C reader can crash the process on a corrupt file (a
-    segmentation fault, found by fuzzing), which must be an error message, not a crash. The child
-    comes from a fork server (one clean process, started once, with scipy preloaded), so a load costs
-    a fork, and forking this possibly multi-threaded process is avoided.
+    """``scipy.io.loadmat`` in a child process (``pipeline.mat_reader``): its C reader can crash on a
+    corrupt file, which must be an error message, not a crash.
 
     Raises:
         InputFormatError: the file is not readable as a MATLAB .mat file, or crashed the reader.
     """
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-    from concurrent.futures.process import BrokenProcessPool
+    from pipeline.mat_reader import ReaderCrashedError, load_mat
 
     try:
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(["pipeline.loaders", "scipy.io"])
-        with ProcessPoolExecutor(1, mp_context=ctx) as pool:
-            return pool.submit(_loadmat, str(path)).result()
-    except BrokenProcessPool:
+        return load_mat(path)
+    except ReaderCrashedError:
         raise InputFormatError(f"{path}: corrupt .mat file (it crashed the MATLAB reader)") from None
     except Exception as exc:  # scipy raises many kinds on a corrupt file
         raise InputFormatError(
