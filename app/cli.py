@@ -6,6 +6,7 @@ import argparse
 import logging
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -445,6 +446,40 @@ def _show_config(args: argparse.Namespace) -> int:
     return 0
 
 
+def _demo(args: argparse.Namespace) -> int:
+    from app.demo import DemoOptions, run_demo
+
+    cfg = _config(args)
+    return run_demo(
+        DemoOptions(
+            path=args.path,
+            duration_s=args.duration,
+            speed_mps=args.speed,
+            grade=args.grade or ("icm20948" if args.dual_imu else "mpu6500x4"),
+            save=args.save,
+            viewer=not args.no_viewer,
+            realtime=args.pace,
+            seed=args.seed,
+            feet=args.feet,
+            web=args.web,
+            capture=bool(cfg["session.capture"]),
+            config=cfg,
+            miscalibrated=args.miscalibrated,
+            dual_imu=args.dual_imu,
+            lever_b_m=_lever(args.lever_arm),
+            board_lever_b_m=_lever(args.board_lever_arm),
+            tof=args.tof,
+            stance=args.stance,
+        )
+    )
+
+
+def _experiment(args: argparse.Namespace) -> int:
+    from app.experiments import run_experiment
+
+    return run_experiment(args)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``footnav`` console script."""
     argv = sys.argv[1:] if argv is None else argv
@@ -454,57 +489,24 @@ def main(argv: list[str] | None = None) -> int:
     )
     if not args.verbose:  # sessions report link events themselves (terminal, recording, capture)
         logging.getLogger("device.links").setLevel(logging.ERROR)
+    commands: dict[str, Callable[[argparse.Namespace], int]] = {
+        "demo": _demo,
+        "live": lambda a: _live(a, argv),
+        "scan": _scan,
+        "calibrate": _calibrate,
+        "replay": _replay,
+        "config": _show_config,
+        "export": _export,
+        "evaluate": _evaluate,
+        "experiment": _experiment,
+    }
     try:
-        if args.command == "demo":
-            from app.demo import DemoOptions, run_demo
-
-            cfg = _config(args)
-            return run_demo(
-                DemoOptions(
-                    path=args.path,
-                    duration_s=args.duration,
-                    speed_mps=args.speed,
-                    grade=args.grade or ("icm20948" if args.dual_imu else "mpu6500x4"),
-                    save=args.save,
-                    viewer=not args.no_viewer,
-                    realtime=args.pace,
-                    seed=args.seed,
-                    feet=args.feet,
-                    web=args.web,
-                    capture=bool(cfg["session.capture"]),
-                    config=cfg,
-                    miscalibrated=args.miscalibrated,
-                    dual_imu=args.dual_imu,
-                    lever_b_m=_lever(args.lever_arm),
-                    board_lever_b_m=_lever(args.board_lever_arm),
-                    tof=args.tof,
-                    stance=args.stance,
-                )
-            )
-        if args.command == "live":
-            return _live(args, argv)
-        if args.command == "scan":
-            return _scan(args)
-        if args.command == "calibrate":
-            return _calibrate(args)
-        if args.command == "replay":
-            return _replay(args)
-        if args.command == "config":
-            return _show_config(args)
-        if args.command == "export":
-            return _export(args)
-        if args.command == "evaluate":
-            return _evaluate(args)
-        if args.command == "experiment":
-            from app.experiments import run_experiment
-
-            return run_experiment(args)
+        return commands[args.command](args)
     except FootnavError as exc:
         print(f"footnav: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
-    return 2
 
 
 if __name__ == "__main__":
