@@ -25,7 +25,7 @@ What it showed (2026-11-22, ``--sigma-ms 5``): on the emulator an injected 5 ms 
 (5.1-5.2 ± 0.2 ms) and its vertical error removed, but the real recordings do not behave like a
 constant delay: τ̂ stays near 0 on the x-io and OpenShoe loops (whose height drift a fixed shift of
 +5 / −6 ms would remove, at the price of a 0.05 m/s vertical velocity error at every heel strike), and
-on the nine PyShoe trials of one unit it scatters from −7 to +6 ms with σ below 1 ms. The state was
+on the nine PyShoe trials of one unit it scatters from −7 to +6 ms, mostly with σ below 1 ms. The state was
 therefore not added to ``pipeline.eskf``; see README, "Accuracy".
 """
 
