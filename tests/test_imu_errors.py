@@ -147,3 +147,26 @@ def test_bad_inputs_are_refused() -> None:
         corrupt(zeros, np.zeros((9, 3)), 1000.0, "ideal", seed=0)
     with pytest.raises(ValueError, match="rate"):
         corrupt(zeros, zeros, 0.0, "ideal", seed=0)
+
+
+def test_gyroscope_delay_reads_the_true_rate_earlier() -> None:
+    rate_hz = 200.0
+    t = np.arange(400) / rate_hz
+    truth_gyr = np.stack([np.sin(3.0 * t), t, t**2], axis=1)
+    zeros = np.zeros_like(truth_gyr)
+    _, gyr0, _ = corrupt(zeros, truth_gyr, rate_hz, "ideal", seed=1)
+    np.testing.assert_array_equal(gyr0, truth_gyr)  # no delay: unchanged
+    acc, gyr, _ = corrupt(zeros, truth_gyr, rate_hz, "ideal", seed=1, gyr_delay_s=0.0075)  # 1.5 samples
+    np.testing.assert_array_equal(acc, zeros)  # the accelerometer is not delayed
+    # the linear axis is read exactly 7.5 ms earlier (held at the first sample before the start)
+    np.testing.assert_allclose(gyr[2:, 1], t[2:] - 0.0075, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(gyr[:2, 1], 0.0, atol=1e-12)
+    # a negative delay reads ahead; a whole-sample delay is a shift of the samples
+    _, ahead, _ = corrupt(zeros, truth_gyr, rate_hz, "ideal", seed=1, gyr_delay_s=-0.01)
+    np.testing.assert_allclose(ahead[:-2], truth_gyr[2:], rtol=0, atol=1e-12)
+    # the same seed draws the same errors with and without a delay
+    _, _, app_a = corrupt(zeros, truth_gyr, rate_hz, "mpu6500x4", seed=3)
+    _, _, app_b = corrupt(zeros, truth_gyr, rate_hz, "mpu6500x4", seed=3, gyr_delay_s=0.002)
+    np.testing.assert_array_equal(app_a.gyr_noise_b_radps, app_b.gyr_noise_b_radps)
+    with pytest.raises(ValueError, match="finite"):
+        corrupt(zeros, truth_gyr, rate_hz, "ideal", seed=1, gyr_delay_s=float("nan"))

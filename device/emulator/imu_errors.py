@@ -12,6 +12,16 @@ Measured signal, per sensor (accelerometer or gyroscope) and axis, at sample ``k
   started from its stationary distribution. Its driving density is ``σ_bi √(2/τ_c)`` per √s;
 - ``w_k``: white noise, independent between samples.
 
+Optionally the gyroscope lags the accelerometer by a constant ``gyr_delay_s`` = τ (:func:`corrupt`):
+its true signal is read at ``t_k − τ`` instead of ``t_k`` (linear interpolation between the true
+samples, held at the first and last sample beyond the ends). Accelerometer and gyroscope paths of
+one MEMS part have their own digital low-pass filters and delays (the MPU-6000/6050 register map,
+RM-MPU-6000A, lists per DLPF setting e.g. 0 ms for the accelerometer and 0.98 ms for the gyroscope
+at the widest one; the MPU-6500 has separately configured accelerometer and gyroscope filters), and
+a relative delay is what an accelerometer-gyroscope time-offset calibration estimates (Li and
+Mourikis, "Online temporal calibration for camera-IMU systems", IJRR 2014; Rehder et al.,
+"Extending kalibr: calibrating the extrinsics of multiple IMUs and of individual axes", ICRA 2016).
+
 Noise-density convention. Densities here are *one-sided* spectral densities as datasheets give
 them (RMS noise = density × √bandwidth). Samples are taken without an anti-alias filter, so the noise
 bandwidth is the Nyquist frequency and the per-sample standard deviation is::
@@ -227,8 +237,28 @@ def gauss_markov(
     return out
 
 
+def delayed(signal: F64, rate_hz: float, delay_s: float) -> F64:
+    """``signal`` (n, m), sampled at ``rate_hz``, read ``delay_s`` later: row k is the signal at
+    sample time ``t_k − delay_s``, interpolated linearly between samples and held beyond the ends
+    (a negative delay reads ahead). A delay of 0 returns the same values."""
+    n = signal.shape[0]
+    if delay_s == 0.0 or n < 2:
+        return signal
+    pos = np.clip(np.arange(n, dtype=np.float64) - delay_s * rate_hz, 0.0, n - 1.0)
+    i0 = np.minimum(np.floor(pos).astype(np.int64), n - 2)
+    w = (pos - i0)[:, None]
+    out: F64 = (1.0 - w) * signal[i0] + w * signal[i0 + 1]
+    return out
+
+
 def corrupt(
-    truth_acc_b: F64, truth_gyr_b: F64, rate_hz: float, grade: ImuGrade | str, seed: int
+    truth_acc_b: F64,
+    truth_gyr_b: F64,
+    rate_hz: float,
+    grade: ImuGrade | str,
+    seed: int,
+    *,
+    gyr_delay_s: float = 0.0,
 ) -> tuple[F64, F64, ImuErrorsApplied]:
     """Add a grade's errors to true IMU signals.
 
@@ -244,6 +274,9 @@ def corrupt(
         The error magnitudes, or a key of :data:`IMU_GRADES`.
     seed : int
         Seed for ``numpy.random.default_rng``; the same seed gives the same errors.
+    gyr_delay_s : float
+        The gyroscope lags the accelerometer by this much, s (module docstring; 0: no delay, the
+        default). Biases and noise are added after the delay.
 
     Returns
     -------
@@ -272,6 +305,9 @@ def corrupt(
         )
     if not rate_hz > 0.0:
         raise ValueError(f"sample rate must be positive, got {rate_hz} Hz")
+    if not math.isfinite(gyr_delay_s):
+        raise ValueError(f"gyroscope delay must be finite, got {gyr_delay_s} s")
+    gyr_in = delayed(gyr_in, rate_hz, gyr_delay_s)
     n = acc_in.shape[0]
     rng = np.random.default_rng(seed)
     acc_turn_on = grade.acc_bias_sigma_mps2 * rng.standard_normal(3)
