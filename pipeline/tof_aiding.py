@@ -419,6 +419,9 @@ class TofAiding:
             agree = dz & free[None, :]
             hits[free, 2] = ((agree * hits[None, :, 2]).sum(axis=1) / np.maximum(agree.sum(axis=1), 1))[free]
         hits = hits[confirmed]
+        z = hits[:, 2]
+        if z.max() == z.min():  # one floor around (most of the time): nothing to look up
+            return np.full(n, z[0]), np.full(n, z[0])
         nearest = self._nearest_hit(pos_n_m, hits)
         if self._swing_origin is None or self._in_stance:
             return nearest, nearest.copy()
