@@ -61,7 +61,7 @@ _NOT_5X = pytest.mark.xfail(
     strict=True,
     reason="not met on stairs with this seed: vertical error at footfalls 1.0-2.0x lower than ZUPT alone with "
     "seeds 2-8 (5.7x with seed 1): each new tread is placed at the state's height, i.e. with the inertial drift "
-    "of the climb so far (the zero-velocity-aided solution drifts 1.5-2.5 mm per stride up the emulated flight "
+    "of the climb so far (the zero-velocity-aided solution drifts about 2 mm per stride up the emulated flight "
     "even with error-free IMU signals)",
 )
 
