@@ -60,7 +60,14 @@ the nearest ahead of it, and where these are on different floors the clearance i
 floor interpolated between them by distance (the expected floor for an edge anywhere between them:
 a 16 cm riser taken a few centimetres early or late costs less than the hard switch of the nearest
 hit, which put the IMU on the wrong tread for about 8 ms at each edge: 1.5 cm RMS on the emulated
-stairs); the floor reported under the IMU is the nearer of the two. Elsewhere (or before the IMU
+stairs); the floor reported under the IMU is the nearer of the two. The bracket is narrowed with
+the edges learned in earlier swings: at the end of each swing, its hits are grouped by surface
+(heights within ``snap_m``) and sorted along the way, and between consecutive surfaces the edge lies
+between the last hit of the one and the first of the next; an edge seen again (the way down the
+same flight, the next lap; its line taken across the way walked, as a step edge is) with the same
+two floors is intersected with that bracket (each widened by ``EDGE_MARGIN_M``; an intersection
+that would be empty is ignored). Measured on the emulated stairs, seeds 1-8: 1.16-1.29 cm clearance
+RMS without the learned edges, 1.02-1.18 cm with them. Elsewhere (or before the IMU
 has moved ``SWING_MIN_M``) it is the nearest hit's.
 A toe sensor ranges the tread ahead before the IMU is over it, so the floor under the IMU changes
 close to where the step edge is.
@@ -68,6 +75,7 @@ close to where the step edge is.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import deque
 from dataclasses import dataclass, field
@@ -81,6 +89,16 @@ from pipeline.height_detector import HeightDetectorParams
 F64 = NDArray[np.float64]
 
 SWING_MIN_M = 0.02
+EDGE_MAX_M = 0.15
+"""A step edge crossed in a swing is remembered when the hits on either side of it are at most this
+far apart along the way (wider brackets say little: the footprints are 3-10 cm apart in swing)."""
+
+EDGE_MARGIN_M = 0.01
+"""Each remembered edge bracket is widened by this on both sides before use: the horizontal position
+drifts between two passes over the same edge (about 1 cm RMS on the emulated walks)."""
+
+EDGE_MEMORY = 2000
+"""Edges remembered (the most recent)."""
 """In swing, the floor under the IMU is looked up along the way from the last stance once the IMU
 has moved this far from it (before, the nearest hit's)."""
 
@@ -269,6 +287,8 @@ class TofAiding:
         self._provisional = False
         self._stance_z = 0.0
         self._swing_origin: tuple[float, float] | None = None
+        self._swing_hits: list[tuple[float, float, float, float]] = []
+        self._edges: deque[tuple[float, float, float, float, float, float, float]] = deque(maxlen=EDGE_MEMORY)
         self._past_edge = np.zeros(self.n_sensors, dtype=bool)
         self._hits: deque[tuple[float, float, float, float]] = deque(maxlen=config.hit_memory)
         self._pending: list[RangeBatch] = []
@@ -323,6 +343,8 @@ class TofAiding:
         if not stance and self._in_stance:
             self._swing_origin = (float(x[0]), float(x[1]))
         if stance and not self._in_stance:
+            self._learn_edges(float(x[0]), float(x[1]))
+            self._swing_hits = []
             self._past_edge[:] = False
             self._stance_obs = []
             self._decided = False
@@ -369,6 +391,8 @@ class TofAiding:
             level = self._nearest_level(floor_obs)
             hit_x, hit_y = float(res[tu.RES_HIT_X]), float(res[tu.RES_HIT_Y])
             self._hits.append((hit_x, hit_y, floor_obs if level is None else level, float(level is not None)))
+            if not stance:
+                self._swing_hits.append(self._hits[-1])
         self.counts.add(CODE_NAMES[code])
         return code, height, innovation
 
@@ -441,7 +465,64 @@ class TofAiding:
         between = moved & np.isfinite(db) & np.isfinite(da)
         w = np.where(between, db / np.maximum(db + da, 1e-9), 0.0)
         zb, za = hits[ib, 2], hits[ia, 2]
+        if self._edges:
+            for i in np.flatnonzero(between & (np.abs(za - zb) > self.config.snap_m)):
+                lo, hi = self._narrow(
+                    s_imu[i] - db[i], s_imu[i] + da[i], ox, oy, dx[i] * inv[i], dy[i] * inv[i], zb[i], za[i]
+                )
+                w[i] = min(max((s_imu[i] - lo) / max(hi - lo, 1e-9), 0.0), 1.0)
         return np.where(between, np.where(w < 0.5, zb, za), nearest), np.where(between, zb + w * (za - zb), nearest)
+
+    def _learn_edges(self, end_x: float, end_y: float) -> None:
+        """Step edges crossed in the swing that just ended: between consecutive surfaces along the way."""
+        if self._swing_origin is None or len(self._swing_hits) < 4:
+            return
+        ox, oy = self._swing_origin
+        length = math.hypot(end_x - ox, end_y - oy)
+        if length < 0.1:
+            return
+        ux, uy = (end_x - ox) / length, (end_y - oy) / length
+        hits = np.asarray(self._swing_hits)
+        s_hit = (hits[:, 0] - ox) * ux + (hits[:, 1] - oy) * uy
+        z = hits[:, 2]
+        order = np.argsort(z)
+        snap = self.config.snap_m
+        groups: list[NDArray[np.int64]] = []
+        start = 0
+        for k in range(1, order.size + 1):
+            if k == order.size or z[order[k]] - z[order[k - 1]] > snap:
+                if k - start >= 2:
+                    groups.append(order[start:k])
+                start = k
+        surf = sorted(((float(np.median(s_hit[g])), float(np.mean(z[g])), g) for g in groups), key=lambda v: v[0])
+        for (_, z1, g1), (_, z2, g2) in itertools.pairwise(surf):
+            if abs(z2 - z1) <= snap:
+                continue
+            lo, hi = float(np.max(s_hit[g1])), float(np.min(s_hit[g2]))
+            a, b = min(lo, hi), max(lo, hi)
+            if b - a > EDGE_MAX_M:
+                continue
+            mid = 0.5 * (a + b)
+            self._edges.append((ox + mid * ux, oy + mid * uy, ux, uy, 0.5 * (b - a), z1, z2))
+
+    def _narrow(
+        self, lo: float, hi: float, ox: float, oy: float, ux: float, uy: float, zb: float, za: float
+    ) -> tuple[float, float]:
+        """The bracket [lo, hi] of an edge between floors zb and za, along (ux, uy) from (ox, oy),
+        intersected with the brackets of the same edge learned in earlier swings."""
+        e = np.asarray(self._edges)
+        snap = self.config.snap_m
+        parallel = np.abs(e[:, 2] * ux + e[:, 3] * uy) > 0.9
+        same = ((np.abs(e[:, 5] - zb) <= snap) & (np.abs(e[:, 6] - za) <= snap)) | (
+            (np.abs(e[:, 5] - za) <= snap) & (np.abs(e[:, 6] - zb) <= snap)
+        )
+        s_e = (e[:, 0] - ox) * ux + (e[:, 1] - oy) * uy
+        hw = e[:, 4] + EDGE_MARGIN_M
+        for k in np.flatnonzero(parallel & same):
+            a, b = max(lo, s_e[k] - hw[k]), min(hi, s_e[k] + hw[k])
+            if a < b:
+                lo, hi = a, b
+        return lo, hi
 
     @staticmethod
     def _nearest_hit(pos_n_m: F64, hits: F64) -> F64:
