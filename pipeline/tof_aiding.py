@@ -89,6 +89,9 @@ from pipeline.height_detector import HeightDetectorParams
 F64 = NDArray[np.float64]
 
 SWING_MIN_M = 0.02
+"""In swing, the floor under the IMU is looked up along the way from the last stance once the IMU
+has moved this far from it (before, the nearest hit's)."""
+
 EDGE_MAX_M = 0.15
 """A step edge crossed in a swing is remembered when the hits on either side of it are at most this
 far apart along the way (wider brackets say little: the footprints are 3-10 cm apart in swing)."""
@@ -99,8 +102,6 @@ drifts between two passes over the same edge (about 1 cm RMS on the emulated wal
 
 EDGE_MEMORY = 2000
 """Edges remembered (the most recent)."""
-"""In swing, the floor under the IMU is looked up along the way from the last stance once the IMU
-has moved this far from it (before, the nearest hit's)."""
 
 
 def _unit(v: tuple[float, float, float]) -> tuple[float, float, float]:
@@ -289,6 +290,7 @@ class TofAiding:
         self._swing_origin: tuple[float, float] | None = None
         self._swing_hits: list[tuple[float, float, float, float]] = []
         self._edges: deque[tuple[float, float, float, float, float, float, float]] = deque(maxlen=EDGE_MEMORY)
+        self._edges_arr = np.empty((0, 7))
         self._past_edge = np.zeros(self.n_sensors, dtype=bool)
         self._hits: deque[tuple[float, float, float, float]] = deque(maxlen=config.hit_memory)
         self._pending: list[RangeBatch] = []
@@ -465,7 +467,7 @@ class TofAiding:
         between = moved & np.isfinite(db) & np.isfinite(da)
         w = np.where(between, db / np.maximum(db + da, 1e-9), 0.0)
         zb, za = hits[ib, 2], hits[ia, 2]
-        if self._edges:
+        if self._edges_arr.shape[0]:
             for i in np.flatnonzero(between & (np.abs(za - zb) > self.config.snap_m)):
                 lo, hi = self._narrow(
                     s_imu[i] - db[i], s_imu[i] + da[i], ox, oy, dx[i] * inv[i], dy[i] * inv[i], zb[i], za[i]
@@ -504,13 +506,14 @@ class TofAiding:
                 continue
             mid = 0.5 * (a + b)
             self._edges.append((ox + mid * ux, oy + mid * uy, ux, uy, 0.5 * (b - a), z1, z2))
+        self._edges_arr = np.asarray(self._edges, dtype=np.float64).reshape(-1, 7)
 
     def _narrow(
         self, lo: float, hi: float, ox: float, oy: float, ux: float, uy: float, zb: float, za: float
     ) -> tuple[float, float]:
         """The bracket [lo, hi] of an edge between floors zb and za, along (ux, uy) from (ox, oy),
         intersected with the brackets of the same edge learned in earlier swings."""
-        e = np.asarray(self._edges)
+        e = self._edges_arr
         snap = self.config.snap_m
         parallel = np.abs(e[:, 2] * ux + e[:, 3] * uy) > 0.9
         same = ((np.abs(e[:, 5] - zb) <= snap) & (np.abs(e[:, 6] - za) <= snap)) | (
