@@ -286,18 +286,19 @@ class Navigator:
         gyr = np.ascontiguousarray(batch.gyr_b_radps, dtype=np.float64)
         still_c = np.ascontiguousarray(still)
         floor_z: F64 | None = None
+        floor_c: F64 | None = None
         ranges: RangeOutputs | None = None
         if not self.tof.active:
             eskf.run_filter(self._x, self._P, acc, gyr, dt, still_c, self._par, pos, vel, quat, cov, self._counters)
         else:
-            floor_z, ranges = self._run_with_ranges(batch, acc, gyr, dt, still_c, pos, vel, quat, cov)
+            floor_z, floor_c, ranges = self._run_with_ranges(batch, acc, gyr, dt, still_c, pos, vel, quat, cov)
         c = self._counters
         s = self.stats
         s.bad_dt, s.gaps = int(c[eskf.CNT_BAD_DT]), int(c[eskf.CNT_GAP])
         s.bad_samples, s.zero_velocity_updates = int(c[eskf.CNT_BAD_SAMPLE]), int(c[eskf.CNT_UPDATES])
         s.zero_rate_updates, s.zero_rate_rejected = int(c[eskf.CNT_ZARU]), int(c[eskf.CNT_ZARU_REJECTED])
         s.samples_out += n
-        clearance = pos[:, 2].copy() if floor_z is None else pos[:, 2] - floor_z
+        clearance = pos[:, 2].copy() if floor_c is None else pos[:, 2] - floor_c
         strides = self._strides.update(batch.t_s, clearance, still)
         altitude = None
         if self._altitude:
@@ -332,9 +333,10 @@ class Navigator:
         vel: F64,
         quat: F64,
         cov: F64,
-    ) -> tuple[F64, RangeOutputs]:
+    ) -> tuple[F64, F64, RangeOutputs]:
         """The filter over ``batch`` with the due ToF readings applied at their times (class docstring);
-        returns the floor height under the IMU per sample and what became of each reading."""
+        returns the floor height under the IMU per sample, the floor height the clearance is measured
+        from (``TofAiding.floor_under``) and what became of each reading."""
         assert self._x is not None
         x, P, par, cnt = self._x, self._P, self._par, self._counters
         n = len(batch)
@@ -344,7 +346,7 @@ class Navigator:
         at = np.searchsorted(batch.t_s, due.t_s, side="right") - 1
         self.tof.counts.add("late", int(np.count_nonzero(at < 0)))
         heights, codes, innov, floors = np.full(m, np.nan), np.zeros(m, np.int64), np.full(m, np.nan), np.zeros(m)
-        floor_z = np.empty(n)
+        floor_z, floor_c = np.empty(n), np.empty(n)
         a = 0
         for j in range(m + 1):
             b = n if j == m else int(at[j]) + 1
@@ -352,7 +354,7 @@ class Navigator:
                 eskf.run_filter(
                     x, P, acc[a:b], gyr[a:b], dt[a:b], still[a:b], par, pos[a:b], vel[a:b], quat[a:b], cov[a:b], cnt
                 )
-                floor_z[a:b] = self.tof.floor_under(pos[a:b])
+                floor_z[a:b], floor_c[a:b] = self.tof.floor_under(pos[a:b], still[a:b])
                 a = b
             if j < m:
                 stance = bool(still[max(a - 1, 0)])
@@ -360,7 +362,7 @@ class Navigator:
                     x, P, float(due.t_s[j]), int(due.sensor[j]), float(due.range_m[j]), int(due.status[j]), stance
                 )
                 floors[j] = self.tof.floor_z_m
-        return floor_z, RangeOutputs(due.t_s, due.sensor, due.status, heights, codes, innov, floors)
+        return floor_z, floor_c, RangeOutputs(due.t_s, due.sensor, due.status, heights, codes, innov, floors)
 
 
 def nav_batch(

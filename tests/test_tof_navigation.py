@@ -49,21 +49,33 @@ def test_stairs_floor_is_followed_and_never_gone_through(stairs70: exp.Recording
 
 @pytest.mark.xfail(
     strict=True,
-    reason="not met on stairs: clearance 1.51 cm RMS; the floor under the IMU is taken from the wrong "
-    "tread for a few ms at each step edge (0.5 cm RMS away from the edges)",
+    reason="not met on stairs: clearance 1.08 cm RMS (1.02-1.18 cm with seeds 1-8); near each step edge the "
+    "floor under the IMU is known only to lie between the last hits on either side (3-10 cm apart in swing)",
 )
 def test_stairs_clearance_within_1cm(stairs70: exp.Recording) -> None:
     _, tof = exp.compare(stairs70)
     assert tof.clearance_rms_m <= 0.01
 
 
-@pytest.mark.xfail(
+def test_stairs_clearance_near_step_edges_is_interpolated_and_learned(stairs70: exp.Recording) -> None:
+    """Regression guard: 1.51 cm RMS with the nearest hit's floor, 1.20 cm interpolated between the hits
+    on either side of an edge, 1.08 cm with the edges learned in earlier swings."""
+    _, tof = exp.compare(stairs70)
+    assert tof.clearance_rms_m <= 0.0115
+
+
+_NOT_5X = pytest.mark.xfail(
     strict=True,
-    reason="not met on stairs: vertical error at footfalls 3.0x lower than ZUPT alone with seed 1 (0.40 vs "
-    "1.18 cm), 0.8-0.9x with seeds 2-3: each new tread's height carries the inertial drift of its first stance",
+    reason="not met on stairs with this seed: vertical error at footfalls 1.0-2.0x lower than ZUPT alone with "
+    "seeds 2-8 (5.7x with seed 1): each new tread is placed at the state's height, i.e. with the inertial drift "
+    "of the climb so far (the zero-velocity-aided solution drifts about 2 mm per stride up the emulated flight "
+    "even with error-free IMU signals)",
 )
-def test_stairs_vertical_error_5x_lower(stairs70: exp.Recording) -> None:
-    zupt, tof = exp.compare(stairs70)
+
+
+@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=_NOT_5X), pytest.param(3, marks=_NOT_5X)])
+def test_stairs_vertical_error_5x_lower(seed: int) -> None:
+    zupt, tof = exp.compare(exp.record("stairs", 70.0, seed=seed))
     assert zupt.z_stance_rms_m >= 5.0 * tof.z_stance_rms_m
 
 
@@ -104,9 +116,9 @@ def test_streaming_in_small_batches_matches_the_batch_run(walk70: exp.Recording)
     assert nav.tof.counts.get("late") > 0  # readings that came in the read after their sample
 
 
-def _bad_recording(path: str) -> tuple[exp.Recording, RangeBatch]:
+def _bad_recording(path: str, seed: int = 4) -> tuple[exp.Recording, RangeBatch]:
     sensors = TofSensorModel(seed=9, timeout_rate=0.2, spurious_rate=0.1)
-    rec = exp.record(path, 70.0, seed=4, sensors=sensors)
+    rec = exp.record(path, 70.0, seed=seed, sensors=sensors)
     # a reading from a sensor that does not exist, a sensor error, a zero range with a valid status
     extra = RangeBatch(
         t_s=np.array([10.0001, 10.0002, 20.0001]),
@@ -137,13 +149,26 @@ def test_bad_input_is_gated_counted_and_never_pulls_through_the_floor() -> None:
     assert np.sqrt(np.mean(err_z**2)) < 0.2 * np.sqrt(np.mean(err_z0**2))
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="not met: on stairs with 10 % reflections the vertical error at footfalls is 2.4x that of "
-    "ZUPT alone (4.6 vs 1.9 cm): a tread's level is taken from the state at its first stance",
+@pytest.mark.parametrize(
+    "seed",
+    [
+        1,
+        2,
+        pytest.param(
+            3,
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="not met with this walk: 1.76 vs 1.35 cm (ZUPT alone); walks 1, 2, 4, 5: 0.75 vs 1.17, "
+                "0.58 vs 0.97, 1.66 vs 1.85, 1.75 vs 1.77 cm. A tread is placed at the state's height at the end "
+                "of its first stance, and readings let through in the swings before it still move the state",
+            ),
+        ),
+        4,
+    ],
 )
-def test_bad_input_on_stairs_is_no_worse_than_zupt_alone() -> None:
-    rec, ranges = _bad_recording("stairs")
+def test_bad_input_on_stairs_is_no_worse_than_zupt_alone(seed: int) -> None:
+    """Stairs, 20 % time-outs, 10 % reflections, odd readings: the vertical error at footfalls."""
+    rec, ranges = _bad_recording("stairs", seed)
     t = rec.truth
     zupt, _ = navigate(t.t_s, rec.acc_b_mps2, rec.gyr_b_radps, t.rate_hz)
     nav, _ = navigate(t.t_s, rec.acc_b_mps2, rec.gyr_b_radps, t.rate_hz, ranges=ranges)
