@@ -6,6 +6,7 @@ The file (TOML, read with :mod:`tomllib`)::
     [session]
     sessions_dir = "sessions"   # capture files go here
     capture = true              # capture every live session (and the demo)
+    capture_flush_s = 1.0       # captured bytes reach the OS at most this late (what a crash can lose)
 
     [unit]
     profile = "mpu6500x4"       # a built-in profile or one of [profiles.NAME]
@@ -41,6 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from device.capture import FLUSH_PERIOD_S
 from pipeline.errors import FootnavError
 from pipeline.navigator import NavConfig
 from pipeline.profiles import PROFILES, UnitProfile
@@ -51,7 +53,11 @@ DEFAULT_SESSIONS_DIR = "sessions"
 DEFAULT = "default"
 CLI = "command line"
 
-_SESSION_DEFAULTS: dict[str, Any] = {"sessions_dir": DEFAULT_SESSIONS_DIR, "capture": True}
+_SESSION_DEFAULTS: dict[str, Any] = {
+    "sessions_dir": DEFAULT_SESSIONS_DIR,
+    "capture": True,
+    "capture_flush_s": FLUSH_PERIOD_S,
+}
 _UNIT_DEFAULTS: dict[str, Any] = {"profile": "mpu6500x4", "rate_divider": 0}
 _CALIBRATION_DEFAULTS: dict[str, Any] = {"dir": "", "apply": True}
 _FILTER_FIELDS = {f.name: f for f in dataclasses.fields(NavConfig) if f.name not in ("profile", "detector")}

@@ -88,8 +88,12 @@ def open_capture(config: Config, session_id: str, *, enabled: bool, extra: dict[
     if not enabled:
         return None
     path = Path(config["session.sessions_dir"]) / f"{session_id}.mcap"
+    flush_s = float(config["session.capture_flush_s"])
+    if not flush_s > 0.0:
+        where = config.source("session.capture_flush_s")
+        raise FootnavError(f"capture_flush_s must be positive, got {flush_s} ({where})")
     try:
-        writer = CaptureWriter(path, session={"session_id": session_id, **extra})
+        writer = CaptureWriter(path, session={"session_id": session_id, **extra}, flush_period_s=flush_s)
     except OSError as exc:
         notice(f"cannot write the capture {path}: {exc.strerror or exc}; carrying on without a capture")
         return None

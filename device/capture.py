@@ -54,8 +54,11 @@ log = logging.getLogger(__name__)
 FORMAT_VERSION: Final = 1
 PROFILE: Final = "footnav"
 SUFFIX: Final = ".mcap"
-FLUSH_PERIOD_S: Final = 0.1
-"""Data is on disk (in the OS) at most this long after it was read."""
+FLUSH_PERIOD_S: Final = 1.0
+"""Data is on disk (in the OS) at most this long after it was read. Each flush closes a chunk, and the
+``mcap`` writer keeps every chunk's index entry (about 300 bytes of small Python objects) until the
+file is closed: at 0.1 s that was 36 000 entries an hour, 7.5 MB/h of heap that also pinned the
+allocator's arenas (the resident size of an hour's soak crept 16 MB/h); at 1 s it is 3 600."""
 _MAGIC: Final = b"\x89MCAP0\r\n"
 _BYTES: Final = "application/octet-stream"
 _JSON: Final = "application/json"
