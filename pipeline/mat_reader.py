@@ -42,7 +42,9 @@ class _Child:
         atexit.register(self.close)
 
     def _start(self) -> subprocess.Popen[bytes]:
-        if self._proc is None or self._proc.poll() is not None:
+        if self._proc is not None and self._proc.poll() is not None:
+            self.close()  # died since the last load
+        if self._proc is None:
             self._proc = subprocess.Popen(
                 [sys.executable, "-m", "pipeline.mat_reader"],
                 stdin=subprocess.PIPE,
@@ -63,17 +65,24 @@ class _Child:
                 ok, value = pickle.loads(_read_exactly(proc.stdout, size))
             except (OSError, EOFError, struct.error):
                 proc.kill()
-                proc.wait()
+                self.close()
                 raise ReaderCrashedError(f"the MATLAB reader crashed (exit code {proc.returncode})") from None
         if not ok:
             raise value
         return value
 
     def close(self) -> None:
-        if self._proc is not None and self._proc.poll() is None:
-            assert self._proc.stdin is not None
-            self._proc.stdin.close()
-            self._proc.wait(timeout=5)
+        proc, self._proc = self._proc, None
+        if proc is None:
+            return
+        for pipe in (proc.stdin, proc.stdout):  # EOF on stdin ends the child
+            if pipe is not None:
+                pipe.close()
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
 
 
 def _read_exactly(stream: IO[bytes], n: int) -> bytes:
