@@ -191,6 +191,12 @@ def _readline(stream: IO[str], timeout_s: float) -> str:
     return result[0]
 
 
+def _interruptible() -> None:
+    """In footnav's child before it starts: SIGINT acts as Ctrl-C even when this soak was started in
+    the background of a non-interactive shell (which starts it with SIGINT ignored, inherited)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def run_soak(
     minutes: float,
     work: Path,
@@ -221,7 +227,7 @@ def run_soak(
             live = subprocess.Popen(
                 [sys.executable, "-m", "app", "live", "--left", ports[0], "--right", ports[1], "--no-viewer",
                  "--save", str(rrd), "--sessions", str(sessions)],
-                cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=err,
+                cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=err, preexec_fn=_interruptible,
             )  # fmt: skip
             finished: list[str] = []
             waiter = threading.Thread(target=lambda: finished.append(emu.stdout.readline()), daemon=True)  # type: ignore[union-attr]
