@@ -191,12 +191,6 @@ def _readline(stream: IO[str], timeout_s: float) -> str:
     return result[0]
 
 
-def _interruptible() -> None:
-    """In footnav's child before it starts: SIGINT acts as Ctrl-C even when this soak was started in
-    the background of a non-interactive shell (which starts it with SIGINT ignored, inherited)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 def run_soak(
     minutes: float,
     work: Path,
@@ -207,6 +201,10 @@ def run_soak(
     bit_error_rate: float = 0.0,
 ) -> SoakResult:
     """Run the soak (see the module docstring) in ``work``; returns what it measured."""
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        # started in the background of a non-interactive shell: footnav's child would inherit SIGINT
+        # ignored and never see the stop (a caught signal is reset to its default across exec)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     env = dict(os.environ)
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     env.pop("DISPLAY", None)
@@ -227,7 +225,7 @@ def run_soak(
             live = subprocess.Popen(
                 [sys.executable, "-m", "app", "live", "--left", ports[0], "--right", ports[1], "--no-viewer",
                  "--save", str(rrd), "--sessions", str(sessions)],
-                cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=err, preexec_fn=_interruptible,
+                cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=err,
             )  # fmt: skip
             finished: list[str] = []
             waiter = threading.Thread(target=lambda: finished.append(emu.stdout.readline()), daemon=True)  # type: ignore[union-attr]
