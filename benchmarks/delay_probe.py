@@ -200,6 +200,7 @@ def delay_filter_in_navigator(sigma_tau_s: float, tau0_s: float = 0.0) -> Iterat
         gyr: F64,
         dt: F64,
         stance: NDArray[np.bool_],
+        zupt_ratio: F64,  # not used: this probe keeps the ZUPT noise equal on all axes, as measured
         par: F64,
         out_pos: F64,
         out_vel: F64,

@@ -142,6 +142,7 @@ def run_filter_scheme(
     gyr_b_radps: F64,
     dt_s: F64,
     stance: NDArray[np.bool_],
+    zupt_ratio: F64,
     par: F64,
     out_pos: F64,
     out_vel: F64,
@@ -312,7 +313,7 @@ def run_filter_scheme(
                 pa[r] = acc_b_mps2[k, r]
                 pg[r] = gyr_b_radps[k, r]
         if stance[k] and not bad:
-            _correct(x, P, gyr_b_radps, k, par, y, work, counters)
+            _correct(x, P, gyr_b_radps, zupt_ratio, k, par, y, work, counters)
         for r in range(3):
             out_pos[k, r] = x[r]
             out_vel[k, r] = x[3 + r]
@@ -334,6 +335,7 @@ def scheme_in_navigator(scheme: int) -> Iterator[None]:
         gyr: F64,
         dt: F64,
         stance: NDArray[np.bool_],
+        zupt_ratio: F64,
         par: F64,
         pos: F64,
         vel: F64,
@@ -341,7 +343,7 @@ def scheme_in_navigator(scheme: int) -> Iterator[None]:
         cov: F64,
         counters: NDArray[np.int64],
     ) -> None:
-        run_filter_scheme(x, P, acc, gyr, dt, stance, par, pos, vel, quat, cov, counters, scheme)
+        run_filter_scheme(x, P, acc, gyr, dt, stance, zupt_ratio, par, pos, vel, quat, cov, counters, scheme)
 
     with mock.patch.object(eskf, "run_filter", run):
         yield
@@ -363,8 +365,9 @@ def pure_strapdown(scheme: int, path: str, duration_s: float, rate_hz: float) ->
     counters = np.zeros(N_CNT, dtype=np.int64)
     stance = np.zeros(n, dtype=np.bool_)
     run_filter_scheme(
-        x, np.eye(N_STATE), truth.acc_b_mps2, truth.gyr_b_radps, dt, stance, par, pos, vel, quat, cov, counters, scheme
-    )
+        x, np.eye(N_STATE), truth.acc_b_mps2, truth.gyr_b_radps, dt, stance, np.zeros(n), par, pos, vel, quat, cov,
+        counters, scheme,
+    )  # fmt: skip
     err = pos[-1] - truth.pos_n_m[-1]
     cos_half = min(1.0, abs(float(quat[-1] @ truth.quat_nb_wxyz[-1])))
     return float(np.linalg.norm(err)), float(np.linalg.norm(err[:2])), 2.0 * math.acos(cos_half)

@@ -108,6 +108,7 @@ def run_filter_numpy(
     gyr_b_radps: F64,
     dt_s: F64,
     stance: NDArray[np.bool_],
+    zupt_ratio: F64,
     par: F64,
 ) -> FilterRun:
     """Run the filter sample by sample; arguments as ``pipeline.eskf.run_filter`` (not modified)."""
@@ -163,7 +164,10 @@ def run_filter_numpy(
         if stance[k] and not bad:
             omega = gyr_b_radps[k] - x[13:16]
             r_zupt = par[eskf.PAR_ZUPT] ** 2 + par[eskf.PAR_ROLL_LEVER] ** 2 * float(omega @ omega)
-            x, P = _update(x, P, H_v, -x[3:6], r_zupt * _I3)
+            # vertical: + σ_T² T/γ, T/γ clamped to [0, 1] (NaN: 1)
+            rho = float(np.clip(np.nan_to_num(zupt_ratio[k], nan=1.0), 0.0, 1.0))
+            r_v = r_zupt + par[eskf.PAR_ZUPT_VERT_STAT] ** 2 * rho
+            x, P = _update(x, P, H_v, -x[3:6], np.diag([r_zupt, r_zupt, r_v]))
             counters[eskf.CNT_UPDATES] += 1
             y = gyr_b_radps[k] - x[13:16]
             S = H_bg @ P @ H_bg.T + R_zaru

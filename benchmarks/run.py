@@ -33,7 +33,7 @@ from device.emulator.imu_errors import corrupt
 from pipeline import eskf
 from pipeline.alignment import align_from_still
 from pipeline.detectors import StreamingDetector
-from pipeline.navigator import NavConfig, Navigator, filter_parameters, initial_error_sigmas, navigate
+from pipeline.navigator import NavConfig, Navigator, filter_parameters, initial_error_sigmas, navigate, zupt_ratio
 from pipeline.samples import ImuBatch
 
 RATE_HZ = 1000.0
@@ -155,7 +155,8 @@ def main(argv: list[str] | None = None) -> int:
     navigate(t[:5000], acc[:5000], gyr[:5000], RATE_HZ, cfg)
 
     # the filter's own inputs: aligned start, the detector's stance flags, the profile's parameters
-    _, _, stance = StreamingDetector(cfg.detector, RATE_HZ).update(acc, gyr)
+    stat, threshold, stance = StreamingDetector(cfg.detector, RATE_HZ).update(acc, gyr)
+    ratio = zupt_ratio(stat, threshold)
     al = align_from_still(acc[:500], gyr[:500])
     x0 = np.zeros(16)
     x0[6:10] = al.quat_nb_wxyz
@@ -167,8 +168,9 @@ def main(argv: list[str] | None = None) -> int:
         pos, vel, quat, cov = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 4)), np.empty((m, 4, 4))
         x, P = x0.copy(), P0.copy()
         eskf.run_filter(
-            x, P, acc[:m], gyr[:m], dt[:m], stance[:m], par, pos, vel, quat, cov, np.zeros(eskf.N_CNT, dtype=np.int64)
-        )
+            x, P, acc[:m], gyr[:m], dt[:m], stance[:m], ratio[:m], par, pos, vel, quat, cov,
+            np.zeros(eskf.N_CNT, dtype=np.int64),
+        )  # fmt: skip
         return pos, vel, quat, cov
 
     def streamed() -> None:
@@ -194,11 +196,11 @@ def main(argv: list[str] | None = None) -> int:
     base = _time(
         "numpy per-sample filter (baseline)",
         m,
-        lambda: run_filter_numpy(x0, P0, acc[:m], gyr[:m], dt[:m], stance[:m], par),
+        lambda: run_filter_numpy(x0, P0, acc[:m], gyr[:m], dt[:m], stance[:m], ratio[:m], par),
         1,
     )
     same = _time("filter on the baseline's samples", m, lambda: filter_run(m), max(r, 5))
-    ref = run_filter_numpy(x0, P0, acc[:m], gyr[:m], dt[:m], stance[:m], par)
+    ref = run_filter_numpy(x0, P0, acc[:m], gyr[:m], dt[:m], stance[:m], ratio[:m], par)
     agree = float(np.abs(filter_run(m)[0] - ref.pos_n_m).max())
 
     print(f"  stance (zero-velocity updates) on {stance.mean():.0%} of the samples\n")

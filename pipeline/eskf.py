@@ -34,6 +34,30 @@ passes the zero-velocity detector may still rotate (heel and toe roll, running),
 the gyro bias, so ZARU is applied only when its normalised innovation passes a χ² gate. For the same
 reason the ZUPT noise admits the velocity of a foot rolling about a contact point at most r from
 the IMU: σ_v² = σ_zupt² + (r |ω|)², since |v_imu| = |ω × r| ≤ r |ω| for a rigid foot.
+
+The vertical component's noise also grows with how close the detector's statistic T is to its
+threshold γ (``zupt_ratio`` = T/γ, in [0, 1] at a stance sample), σ_z² = σ_v² + σ_T² T/γ, while
+the horizontal ones stay σ_v²: a "soft" zero-velocity update, whose strength follows the detector's
+evidence of motion instead of a hard binary decision (soft ZUPTs with a detector-derived contact
+prior: "Posterior-contact soft-ZUPT for foot-mounted inertial navigation", Sensors 26(10), 3033,
+2026, doi:10.3390/s26103033). The form is ours: T is the GLRT/SHOE statistic of Skog et al. 2010
+(``pipeline.detectors``), a mean of squared normalised deviations from rest, so a variance
+proportional to it scales like the square of the velocity a deviating specific force builds up; at
+a stance sample T < γ, so the added 1σ is at most σ_T, reached where the foot is barely still (the
+onset and end of stance). Only the vertical axis, because that is where a foot just declared still
+keeps moving: the heel pad and the shoe's sole compress under the load of heel strike and foot-flat
+while friction holds the foot horizontally (Aerts, De Clercq, "Deformation characteristics of the
+heel region of the shod foot during a simulated heel strike: the effect of varying midsole
+hardness", J. Sports Sci. 11(5), 1993; Gefen, Megido-Ravid, Itzchak, "In vivo biomechanical
+behavior of the human heel pad during the stance phase of gait", J. Biomech. 34, 2001), and the
+recordings show it: the PyShoe VICON foot still sinks at up to 0.03 m/s when stance is declared,
+the first ZUPT of an x-io stance lifted the foot 0.36 cm on average, and on error-free emulated
+signals most of the height loss came from stance samples inside the emulator's heel-strike
+transient (README "Accuracy"). The same soft update on all three axes, or a vertical one that
+decays with the time since stance began, or one that grows with the specific force's deviation
+from g instead of T/γ, were measured on every recording and did worse as a whole
+(``benchmarks.zupt_noise``, README "Accuracy").
+
 The covariance propagation multiplies only the non-identity blocks of F and writes one triangle
 (about 800 multiply-adds per sample instead of 2 × 15³); the updates observe three states each, so
 their Joseph form is rank-3 work on one triangle. The per-sample loop allocates nothing (scratch
@@ -74,8 +98,9 @@ P0, V0, TH0, BA0, BG0 = 0, 3, 6, 9, 12
     PAR_ROLL_LEVER,
     PAR_ACC_SCALE,
     PAR_GYR_SCALE,
-) = range(12)
-N_PAR = 12
+    PAR_ZUPT_VERT_STAT,
+) = range(13)
+N_PAR = 13
 
 # counters returned by run_filter
 CNT_BAD_DT, CNT_GAP, CNT_BAD_SAMPLE, CNT_UPDATES, CNT_ZARU, CNT_ZARU_REJECTED = range(6)
@@ -220,15 +245,23 @@ def _nis3(P: F64, s0: int, y0: float, y1: float, y2: float, r: float) -> float:
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _update3(x: F64, P: F64, s0: int, y: F64, r: float, work: F64) -> None:
-    """Kalman update for a measurement z of the three error states s0, s0+1, s0+2 (noise r I).
+    """Kalman update for a measurement z of the three error states s0, s0+1, s0+2 (noise r I);
+    see :func:`_update3_diag`."""  # pragma: no cover
+    _update3_diag(x, P, s0, y, r, r, r, work)
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _update3_diag(x: F64, P: F64, s0: int, y: F64, r0: float, r1: float, r2: float, work: F64) -> None:
+    """Kalman update for a measurement z of the three error states s0, s0+1, s0+2 (noise
+    diag(r0, r1, r2)).
 
     H = rows s0..s0+2 of the identity. Joseph form, expanded for this H (only rank-3 work):
     (I−KH) P (I−KH)ᵀ + K R Kᵀ = P − K P[s,:] − P[:,s] Kᵀ + K (P[s,s] + R) Kᵀ.
     The error is then injected into the nominal state ``x`` and the covariance reset (Solà §7.2-7.3).
     ``work`` is (10, 15) scratch.
     """  # pragma: no cover
-    s00, s01, s02 = P[s0, s0] + r, P[s0, s0 + 1], P[s0, s0 + 2]
-    s11, s12, s22 = P[s0 + 1, s0 + 1] + r, P[s0 + 1, s0 + 2], P[s0 + 2, s0 + 2] + r
+    s00, s01, s02 = P[s0, s0] + r0, P[s0, s0 + 1], P[s0, s0 + 2]
+    s11, s12, s22 = P[s0 + 1, s0 + 1] + r1, P[s0 + 1, s0 + 2], P[s0 + 2, s0 + 2] + r2
     i00, i01, i02, i11, i12, i22 = _inv3_spd(s00, s01, s02, s11, s12, s22)
     y0, y1, y2 = y[0], y[1], y[2]
     # rows of ``work``: 0-2 Kᵀ = S⁻¹ P[s, :], 3-5 (K S)ᵀ, 6-8 P[s, :] (kept: P is overwritten), 9 δx
@@ -369,8 +402,31 @@ def _predict(
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _zupt_noise(par: F64, w2: float, ratio: float) -> tuple[float, float]:
+    """Horizontal and vertical variance of the zero-velocity pseudo-measurement (module docstring):
+    σ_h² = σ_zupt² + (r |ω|)², σ_z² = σ_h² + σ_T² ρ with ρ = T/γ in [0, 1]. ``w2`` = |ω|², ``ratio``
+    the detector's statistic over its threshold (NaN, inf or above 1, a stance from another source
+    than that statistic: 1)."""  # pragma: no cover
+    r_h = par[PAR_ZUPT] ** 2 + par[PAR_ROLL_LEVER] ** 2 * w2
+    rho = ratio
+    if not (rho < 1.0):
+        rho = 1.0
+    elif rho < 0.0:
+        rho = 0.0
+    return r_h, r_h + par[PAR_ZUPT_VERT_STAT] ** 2 * rho
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _correct(
-    x: F64, P: F64, gyr_b_radps: F64, k: int, par: F64, y: F64, work: F64, counters: NDArray[np.int64]
+    x: F64,
+    P: F64,
+    gyr_b_radps: F64,
+    zupt_ratio: F64,
+    k: int,
+    par: F64,
+    y: F64,
+    work: F64,
+    counters: NDArray[np.int64],
 ) -> None:
     """Zero-velocity update, then the χ²-gated zero-angular-rate update, at stance sample ``k``."""  # pragma: no cover
     r_zaru = par[PAR_ZARU] ** 2
@@ -378,7 +434,8 @@ def _correct(
     for r in range(3):
         y[r] = -x[3 + r]
         w2 += (gyr_b_radps[k, r] - x[13 + r]) ** 2
-    _update3(x, P, V0, y, par[PAR_ZUPT] ** 2 + par[PAR_ROLL_LEVER] ** 2 * w2, work)
+    r_h, r_v = _zupt_noise(par, w2, zupt_ratio[k])
+    _update3_diag(x, P, V0, y, r_h, r_h, r_v, work)
     counters[CNT_UPDATES] += 1
     for r in range(3):
         y[r] = gyr_b_radps[k, r] - x[13 + r]
@@ -397,6 +454,7 @@ def run_filter(
     gyr_b_radps: F64,
     dt_s: F64,
     stance: NDArray[np.bool_],
+    zupt_ratio: F64,
     par: F64,
     out_pos: F64,
     out_vel: F64,
@@ -413,6 +471,9 @@ def run_filter(
             (duplicated timestamps); intervals of ``par[PAR_DT_MAX]`` or more are counted as gaps
             (:func:`sample_intervals` caps them there).
         stance: (n,) apply ZUPT + ZARU after propagating sample k.
+        zupt_ratio: (n,) the zero-velocity detector's statistic over its threshold, T/γ, at each sample:
+            sets the vertical noise of that sample's ZUPT (module docstring); zeros give the same
+            noise on all three axes.
         par: (N_PAR,) parameters (see the PAR_* indices).
         out_pos, out_vel: (n, 3) outputs; out_quat (n, 4); out_cov (n, 4, 4): the covariance of
             (x, y, z, ψ), position and the heading error (the z component of δθ).
@@ -426,6 +487,7 @@ def run_filter(
         gyr_b_radps.shape[0] != n
         or dt_s.shape[0] != n
         or stance.shape[0] != n
+        or zupt_ratio.shape[0] != n
         or out_pos.shape[0] < n
         or out_vel.shape[0] < n
         or out_quat.shape[0] < n
@@ -501,7 +563,8 @@ def run_filter(
             for r in range(3):
                 y[r] = -x[3 + r]
                 w2 += (gyr_b_radps[k, r] - x[13 + r]) ** 2
-            _update3(x, P, V0, y, par[PAR_ZUPT] ** 2 + par[PAR_ROLL_LEVER] ** 2 * w2, work)
+            r_h, r_v = _zupt_noise(par, w2, zupt_ratio[k])
+            _update3_diag(x, P, V0, y, r_h, r_h, r_v, work)
             counters[CNT_UPDATES] += 1
             for r in range(3):
                 y[r] = gyr_b_radps[k, r] - x[13 + r]

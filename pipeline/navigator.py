@@ -141,6 +141,7 @@ def filter_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float,
     par[eskf.PAR_ROLL_LEVER] = profile.roll_lever_m
     par[eskf.PAR_ACC_SCALE] = profile.acc_scale_error
     par[eskf.PAR_GYR_SCALE] = profile.gyr_scale_error
+    par[eskf.PAR_ZUPT_VERT_STAT] = profile.zupt_vertical_sigma_mps
     return par
 
 
@@ -285,13 +286,16 @@ class Navigator:
         acc = np.ascontiguousarray(batch.acc_b_mps2, dtype=np.float64)
         gyr = np.ascontiguousarray(batch.gyr_b_radps, dtype=np.float64)
         still_c = np.ascontiguousarray(still)
+        ratio = zupt_ratio(stat, threshold)
         floor_z: F64 | None = None
         floor_c: F64 | None = None
         ranges: RangeOutputs | None = None
         if not self.tof.active:
-            eskf.run_filter(self._x, self._P, acc, gyr, dt, still_c, self._par, pos, vel, quat, cov, self._counters)
+            eskf.run_filter(
+                self._x, self._P, acc, gyr, dt, still_c, ratio, self._par, pos, vel, quat, cov, self._counters
+            )
         else:
-            floor_z, floor_c, ranges = self._run_with_ranges(batch, acc, gyr, dt, still_c, pos, vel, quat, cov)
+            floor_z, floor_c, ranges = self._run_with_ranges(batch, acc, gyr, dt, still_c, ratio, pos, vel, quat, cov)
         c = self._counters
         s = self.stats
         s.bad_dt, s.gaps = int(c[eskf.CNT_BAD_DT]), int(c[eskf.CNT_GAP])
@@ -329,6 +333,7 @@ class Navigator:
         gyr: F64,
         dt: F64,
         still: NDArray[np.bool_],
+        ratio: F64,
         pos: F64,
         vel: F64,
         quat: F64,
@@ -352,7 +357,19 @@ class Navigator:
             b = n if j == m else int(at[j]) + 1
             if b > a:
                 eskf.run_filter(
-                    x, P, acc[a:b], gyr[a:b], dt[a:b], still[a:b], par, pos[a:b], vel[a:b], quat[a:b], cov[a:b], cnt
+                    x,
+                    P,
+                    acc[a:b],
+                    gyr[a:b],
+                    dt[a:b],
+                    still[a:b],
+                    ratio[a:b],
+                    par,
+                    pos[a:b],
+                    vel[a:b],
+                    quat[a:b],
+                    cov[a:b],
+                    cnt,
                 )
                 floor_z[a:b], floor_c[a:b] = self.tof.floor_under(pos[a:b], still[a:b])
                 a = b
@@ -405,6 +422,12 @@ def nav_batch(
         strides=strides,
         altitude=altitude,
     )
+
+
+def zupt_ratio(stat: F64, threshold: F64) -> F64:
+    """The detector's statistic over its threshold, T/γ (n,), contiguous, as ``eskf.run_filter``
+    takes it (the vertical noise of each zero-velocity update, ``pipeline.eskf``)."""
+    return np.ascontiguousarray(stat / threshold, dtype=np.float64)
 
 
 MAX_ABS_ACC_MPS2 = 2000.0

@@ -67,7 +67,7 @@ from numpy.typing import NDArray
 from pipeline import eskf
 from pipeline.eskf import BA0, BG0, N_CNT, N_STATE, P0, TH0, V0, _correct, _predict, sample_intervals
 from pipeline.nav_types import NavBatch
-from pipeline.navigator import NavConfig, Navigator, NavStats, nav_batch
+from pipeline.navigator import NavConfig, Navigator, NavStats, nav_batch, zupt_ratio
 from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s
 from pipeline.samples import ImuBatch
 
@@ -104,6 +104,7 @@ def _storing_pass(
     gyr_b_radps: F64,
     dt_s: F64,
     stance: NDArray[np.bool_],
+    zupt_ratio: F64,
     par: F64,
     xf: F64,
     Pf: F64,
@@ -124,6 +125,7 @@ def _storing_pass(
         gyr_b_radps.shape[0] != n
         or dt_s.shape[0] != n
         or stance.shape[0] != n
+        or zupt_ratio.shape[0] != n
         or xf.shape[0] < n
         or Pf.shape[0] < n
         or xp.shape[0] < n
@@ -155,7 +157,7 @@ def _storing_pass(
         else:
             fn[k, 0] = math.nan
         if stance[k] and not bad:
-            _correct(x, P, gyr_b_radps, k, par, y, work, counters)
+            _correct(x, P, gyr_b_radps, zupt_ratio, k, par, y, work, counters)
         for i in range(16):
             xf[k, i] = x[i]
         for i in range(N_STATE):
@@ -340,12 +342,12 @@ class _CheckpointingNavigator(Navigator):
         super().__init__(config, rate_hz)
         self.segment_samples = segment_samples
         self.checkpoints: list[tuple[int, F64, F64, float]] = []  # (first sample, x, P, t before it)
-        self.inputs: list[tuple[ImuBatch, NDArray[np.bool_]]] = []
+        self.inputs: list[tuple[ImuBatch, NDArray[np.bool_], F64]] = []  # samples, stance, T/γ
 
     def _run(self, batch: ImuBatch, stat: F64, threshold: F64, still: NDArray[np.bool_]) -> NavBatch:
         assert self._x is not None
-        offset = sum(len(b) for b, _ in self.inputs)
-        self.inputs.append((batch, still))
+        offset = sum(len(b) for b, _, _ in self.inputs)
+        self.inputs.append((batch, still, zupt_ratio(stat, threshold)))
         n, seg = len(batch), self.segment_samples
         pos, vel = np.empty((n, 3)), np.empty((n, 3))
         quat, cov = np.empty((n, 4)), np.empty((n, 4, 4))
@@ -386,8 +388,9 @@ def smooth_recording(
     )
     if out is None:
         return None, nav.stats
-    batch = ImuBatch.concat([b for b, _ in nav.inputs]) if len(nav.inputs) > 1 else nav.inputs[0][0]
-    still = np.concatenate([s for _, s in nav.inputs])
+    batch = ImuBatch.concat([b for b, _, _ in nav.inputs]) if len(nav.inputs) > 1 else nav.inputs[0][0]
+    still = np.concatenate([s for _, s, _ in nav.inputs])
+    ratio = np.ascontiguousarray(np.concatenate([r for _, _, r in nav.inputs]))
     acc = np.ascontiguousarray(batch.acc_b_mps2, dtype=np.float64)
     gyr = np.ascontiguousarray(batch.gyr_b_radps, dtype=np.float64)
     stance = np.ascontiguousarray(still)
@@ -410,7 +413,9 @@ def smooth_recording(
         stop = end if is_last else end + 1  # one sample of overlap: the next segment's first
         m = stop - a
         x, P = x0.copy(), P0_.copy()
-        _storing_pass(x, P, acc[a:stop], gyr[a:stop], dt[a:stop], stance[a:stop], nav._par, xf, Pf, xp, Pp, fn, Rm)
+        _storing_pass(
+            x, P, acc[a:stop], gyr[a:stop], dt[a:stop], stance[a:stop], ratio[a:stop], nav._par, xf, Pf, xp, Pp, fn, Rm
+        )
         if is_last:
             ds[:] = 0.0
             Ps[:] = Pf[m - 1]

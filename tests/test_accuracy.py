@@ -29,19 +29,25 @@ def evaluations(shared_data: Path):  # type: ignore[no-untyped-def]
 def test_pyshoe_vicon_trials(evaluations) -> None:  # type: ignore[no-untyped-def]
     armse = np.array([r.armse_2d_m for r in evaluations.values() if r.format == "pyshoe"])
     assert armse.size == 9
-    # measured 0.078 / 0.065 / 0.157 m (mean / median / max); 0.081 / 0.069 / 0.157 with the ZARU
-    # gate at 99 % (pipeline.navigator), 0.094 / 0.069 / 0.270 without the debounce's hysteresis
-    # (pipeline.detectors) too, 0.100 / 0.075 / 0.282 without reconstructing the saturated gyro
-    # stretches as well (pipeline.saturation)
-    assert armse.mean() <= 0.085 and armse.max() <= 0.20
+    # measured 0.079 / 0.065 / 0.157 m (mean / median / max); 0.078 / 0.065 / 0.157 with the ZUPT's
+    # vertical noise not following the detector's T/γ (pipeline.eskf), 0.081 / 0.069 / 0.157 with the
+    # ZARU gate at 99 % (pipeline.navigator) too, 0.094 / 0.069 / 0.270 without the debounce's
+    # hysteresis (pipeline.detectors) too, 0.100 / 0.075 / 0.282 without reconstructing the saturated
+    # gyro stretches as well (pipeline.saturation)
+    assert armse.mean() <= 0.082 and armse.max() <= 0.18
     # pyshoe with one fixed threshold averages 2.29 m on this dataset (DATA.md)
-    assert np.median(armse) <= 0.072
+    assert np.median(armse) <= 0.068
+    # ATE-3D after a yaw + translation fit: mean 0.151 m; 0.164 with a hard vertical ZUPT
+    ate_3d = np.array([r.ate_3d_m for r in evaluations.values() if r.format == "pyshoe"])
+    assert ate_3d.mean() <= 0.16
 
 
 def test_closed_loops(evaluations) -> None:  # type: ignore[no-untyped-def]
     xio, openshoe = evaluations["short_walk"], evaluations["data_inert"]
-    assert xio.loop_2d_m <= 0.08 and xio.loop_3d_m <= 0.35
-    assert openshoe.loop_2d_m <= 0.12 and openshoe.loop_3d_m <= 0.9
+    # measured 3D / 2D: x-io 0.248 / 0.051 m, OpenShoe 0.774 / 0.094 m (0.261 / 0.052 and 0.838 / 0.090
+    # with a hard vertical ZUPT)
+    assert xio.loop_2d_m <= 0.08 and xio.loop_3d_m <= 0.30
+    assert openshoe.loop_2d_m <= 0.12 and openshoe.loop_3d_m <= 0.82
 
 
 @pytest.mark.parametrize("path", ["rectangle", "figure8"])
@@ -64,3 +70,15 @@ def test_stairs_have_no_false_zero_velocity_in_swing() -> None:
     speed = np.linalg.norm(truth.vel_n_mps[-len(nav) :], axis=1)
     assert speed[nav.stance].max() < 0.1
     assert np.linalg.norm(nav.pos_n_m[-1] - truth.pos_n_m[-1]) / truth.distance_m <= 0.003
+
+
+def test_stairs_with_error_free_signals_keep_their_height() -> None:
+    """Zero-velocity aiding alone on the emulator's exact signals: what is left is the stance labels'
+    timing against the motion. Stance samples inside the heel-strike transient took the foot down
+    about 2 mm per stride (final height error −15 mm after 60 s) while the ZUPT's vertical noise did
+    not follow the detector's T/γ (pipeline.eskf); −1.7 mm since."""
+    truth = simulate_walk("stairs", 60.0, rate_hz=1000.0, seed=0)
+    acc, gyr, _ = corrupt(truth.acc_b_mps2, truth.gyr_b_radps, truth.rate_hz, "ideal", seed=0)
+    nav, _ = navigate(truth.t_s, acc, gyr, truth.rate_hz, NavConfig(profile=get_profile("mpu6500x4")))
+    assert nav is not None
+    assert abs(nav.pos_n_m[-1, 2] - truth.pos_n_m[-1, 2]) <= 0.005

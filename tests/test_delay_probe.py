@@ -24,9 +24,10 @@ from tests.test_filter_reference import _inputs  # noqa: E402
 
 
 def test_without_a_delay_it_is_the_reference_filter() -> None:
-    x, P, acc, gyr, dt, stance, par = _inputs()
+    x, P, acc, gyr, dt, stance, _, par = _inputs()
     n = 3000
-    ref = run_filter_numpy(x, P, acc[:n], gyr[:n], dt[:n], stance[:n], par)
+    # T/γ = 0: the probe keeps the zero-velocity noise equal on all axes
+    ref = run_filter_numpy(x, P, acc[:n], gyr[:n], dt[:n], stance[:n], np.zeros(n), par)
     run = run_filter_delay(x, P, acc[:n], gyr[:n], dt[:n], stance[:n], par, sigma_tau_s=0.0)
     np.testing.assert_array_equal(run.counters, ref.counters)
     np.testing.assert_allclose(run.pos_n_m, ref.pos_n_m, rtol=0, atol=1e-9)

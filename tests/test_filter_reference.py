@@ -17,7 +17,7 @@ from device.emulator.imu_errors import corrupt
 from pipeline import eskf
 from pipeline.alignment import align_from_still
 from pipeline.detectors import DetectorParams, StreamingDetector
-from pipeline.navigator import filter_parameters
+from pipeline.navigator import filter_parameters, zupt_ratio
 from pipeline.profiles import get_profile
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -36,24 +36,26 @@ def _inputs() -> tuple[np.ndarray, ...]:
     acc[2500, 1] = np.nan  # a bad sample mid-walk
     t[3000] = t[2999]  # a duplicated timestamp
     t[4000:] += 0.08  # a gap
-    _, _, stance = StreamingDetector(DetectorParams(), RATE_HZ).update(acc, gyr)
+    stat, threshold, stance = StreamingDetector(DetectorParams(), RATE_HZ).update(acc, gyr)
+    ratio = zupt_ratio(stat, threshold)
+    ratio[np.flatnonzero(stance)[::50]] = np.nan  # a NaN T/γ at some stance samples (taken as 1)
     al = align_from_still(acc[:500], gyr[:500])
     x = np.zeros(16)
     x[6:10] = al.quat_nb_wxyz
     P = np.diag(np.array([1e-5] * 3 + [0.01] * 3 + [0.01, 0.01, 2e-4] + [0.05] * 3 + [2e-3] * 3) ** 2)
     par = filter_parameters(get_profile("mpu6500x4"), RATE_HZ, al.gravity_mps2, 0.05)
     dt = np.diff(t, prepend=t[0] - 1.0 / RATE_HZ)
-    return x, P, acc, gyr, dt, stance, par
+    return x, P, acc, gyr, dt, stance, ratio, par
 
 
 def test_compiled_filter_matches_numpy_reference() -> None:
-    x, P, acc, gyr, dt, stance, par = _inputs()
+    x, P, acc, gyr, dt, stance, ratio, par = _inputs()
     n = acc.shape[0]
-    ref = run_filter_numpy(x, P, acc, gyr, dt, stance, par)
+    ref = run_filter_numpy(x, P, acc, gyr, dt, stance, ratio, par)
     x_c, P_c = x.copy(), P.copy()
     pos, vel, quat, pos_cov = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
     counters = np.zeros(eskf.N_CNT, dtype=np.int64)
-    eskf.run_filter(x_c, P_c, acc, gyr, dt, stance, par, pos, vel, quat, pos_cov, counters)
+    eskf.run_filter(x_c, P_c, acc, gyr, dt, stance, ratio, par, pos, vel, quat, pos_cov, counters)
 
     np.testing.assert_array_equal(counters, ref.counters)
     assert counters[eskf.CNT_BAD_SAMPLE] == 1 and counters[eskf.CNT_BAD_DT] == 1 and counters[eskf.CNT_GAP] == 1
@@ -68,7 +70,7 @@ def test_compiled_filter_matches_numpy_reference() -> None:
 
 
 def test_batches_do_not_change_the_result() -> None:
-    x, P, acc, gyr, dt, stance, par = _inputs()
+    x, P, acc, gyr, dt, stance, ratio, par = _inputs()
     n = acc.shape[0]
 
     def run(cuts: list[int]) -> np.ndarray:
@@ -78,7 +80,7 @@ def test_batches_do_not_change_the_result() -> None:
         for a, b in zip([0, *cuts], [*cuts, n], strict=True):
             m = b - a
             eskf.run_filter(
-                x_c, P_c, acc[a:b], gyr[a:b], dt[a:b], stance[a:b], par,
+                x_c, P_c, acc[a:b], gyr[a:b], dt[a:b], stance[a:b], ratio[a:b], par,
                 pos[a:b], np.empty((m, 3)), np.empty((m, 4)), np.empty((m, 4, 4)), counters,
             )  # fmt: skip
         return pos

@@ -43,12 +43,15 @@ def test_first_order_scheme_is_the_filter_and_others_run_every_branch(scheme: in
     x0[6] = 1.0
     P0 = np.diag(initial_error_sigmas(NavConfig(profile=prof), prof) ** 2)
     n = len(truth)
+    # the detector's T/γ, beyond [0, 1] and NaN too (the filter clamps it)
+    ratio = np.random.default_rng(0).uniform(-0.1, 1.2, n)
+    ratio[100] = np.nan
     runs = []
     for fn in (eskf.run_filter, run_filter_scheme):
         x, P = x0.copy(), P0.copy()
         out = _outputs(n)
         counters = np.zeros(eskf.N_CNT, dtype=np.int64)
-        args = (x, P, acc, gyr, dt, truth.stance, par, *out, counters)
+        args = (x, P, acc, gyr, dt, truth.stance, ratio, par, *out, counters)
         if fn is run_filter_scheme:
             fn(*args, scheme)
         else:
@@ -94,7 +97,7 @@ def test_coning_term_is_the_second_order_rotation_vector() -> None:
         gyr = np.stack([a, b])
         out = _outputs(2)
         run_filter_scheme(
-            x, np.eye(15), acc, gyr, np.array([0.0, h]), np.zeros(2, np.bool_), par, *out,
+            x, np.eye(15), acc, gyr, np.array([0.0, h]), np.zeros(2, np.bool_), np.zeros(2), par, *out,
             np.zeros(eskf.N_CNT, np.int64), scheme,
         )  # fmt: skip
         errors[scheme] = 2.0 * np.arccos(min(1.0, abs(float(out[2][1] @ q_ref))))

