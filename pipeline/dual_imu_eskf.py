@@ -64,7 +64,7 @@ from pipeline.dual_imu_common import (
     sample_ok,
     still_window,
 )
-from pipeline.eskf import inject_attitude_and_reset, sample_intervals
+from pipeline.eskf import inject_attitude_and_reset, sample_intervals, zupt_vertical_weight
 from pipeline.navigator import DEFAULT_DT_MAX_S, ZARU_GATE_CHI2_3DOF, initial_error_sigmas
 from pipeline.profiles import UnitProfile, get_profile
 from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s, quat_to_mat_into
@@ -94,8 +94,9 @@ P0, V0, TH0, BA1, BG1, BA2, BG2 = 0, 3, 6, 9, 12, 15, 18
     PAR_ACC_FS,
     PAR_GYR_FS,
     PAR_WDOT_SIGMA,
-) = range(18)
-N_PAR = 18
+    PAR_ZUPT_VERT_STAT,
+) = range(19)
+N_PAR = 19
 
 (
     CNT_BAD1,
@@ -200,6 +201,7 @@ def run_dual_filter(
     gyr: F64,
     dt_s: F64,
     stance: NDArray[np.bool_],
+    zupt_ratio: F64,
     lever_b_m: F64,
     par: F64,
     out_x: F64,
@@ -365,6 +367,7 @@ def run_dual_filter(
                 H[c, V0 + c] = 1.0
                 y[c] = -x[3 + c]
                 r[c] = par[PAR_ZUPT] ** 2 + par[PAR_ROLL_LEVER] ** 2 * w2sum
+            r[2] += par[PAR_ZUPT_VERT_STAT] ** 2 * zupt_vertical_weight(zupt_ratio[k])  # soft vertical (eskf)
             kf_dense.update3(dx, P, H, y, r, work, np.inf)
             _inject(x, P, dx)
             counters[CNT_ZUPT] += 1
@@ -435,6 +438,7 @@ def dual_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float) -
     par[PAR_ACC_WHITE] = acc_white
     par[PAR_ACC_FS] = ACC_FULL_SCALE_MPS2
     par[PAR_GYR_FS] = GYR_FULL_SCALE_RADPS
+    par[PAR_ZUPT_VERT_STAT] = profile.zupt_vertical_sigma_mps
     # 1σ of the smoothed backward difference of the averaged rate (white, σ_w² = gyr_white²/2): with
     # e_k = (1 − α) e_{k−1} + α (u_k − u_{k−1})/Δt, Var e = (α/Δt)² σ_w² · 2/(2 − α)
     alpha = _WDOT_SMOOTHING
@@ -450,6 +454,7 @@ def run_dual_eskf(
     lever_b_m: F64,
     rate_hz: float,
     config: DualEskfConfig | None = None,
+    zupt_ratio: F64 | None = None,
 ) -> DualEskfTrack:
     """Run footnav's dual-IMU filter over a whole record.
 
@@ -463,6 +468,9 @@ def run_dual_eskf(
         Zero-velocity detector output.
     lever_b_m : ndarray, shape (3,)
         IMU 2's position in IMU 1's axes, m.
+    zupt_ratio : ndarray, shape (n,), optional
+        The detector's statistic over its threshold, T/γ: the vertical ZUPT noise follows it as in
+        ``pipeline.eskf``; None: the same noise on every axis.
     """
     cfg = config or DualEskfConfig()
     acc = np.ascontiguousarray(acc_b_mps2, dtype=np.float64)
@@ -470,7 +478,7 @@ def run_dual_eskf(
     window = still_window(acc, gyr, rate_hz, cfg.align_s)
     stream = DualEskfStream(cfg, lever_b_m, rate_hz, acc[window], gyr[window])
     dt = sample_intervals(t_s, t_s[0] - 1.0 / rate_hz, cfg.dt_max_s)
-    return stream.step(t_s, acc, gyr, stance, dt)
+    return stream.step(t_s, acc, gyr, stance, dt, zupt_ratio)
 
 
 class DualEskfStream:
@@ -503,10 +511,20 @@ class DualEskfStream:
         self._imu_ok: list[NDArray[np.bool_]] = []
         self._t: list[F64] = []
 
-    def step(self, t_s: F64, acc_b_mps2: F64, gyr_b_radps: F64, stance: NDArray[np.bool_], dt_s: F64) -> DualEskfTrack:
+    def step(
+        self,
+        t_s: F64,
+        acc_b_mps2: F64,
+        gyr_b_radps: F64,
+        stance: NDArray[np.bool_],
+        dt_s: F64,
+        zupt_ratio: F64 | None = None,
+    ) -> DualEskfTrack:
         """Run over (n,) samples: ``acc``/``gyr`` (n, 2, 3), ``stance`` (n,), ``dt_s`` (n,) the interval
-        before each sample, s. Counters and messages cover everything since the start."""
+        before each sample, s, ``zupt_ratio`` (n,) T/γ (:func:`run_dual_eskf`). Counters and messages
+        cover everything since the start."""
         n = t_s.shape[0]
+        ratio = np.zeros(n) if zupt_ratio is None else np.ascontiguousarray(zupt_ratio, dtype=np.float64)
         m = self.lever_b_m
         out_x = np.empty((n, N_NOMINAL))
         out_cov = np.empty((n, 3, 3))
@@ -516,7 +534,7 @@ class DualEskfStream:
         run_dual_filter(
             self.x, self.P, self.aux,
             np.ascontiguousarray(acc_b_mps2, dtype=np.float64), np.ascontiguousarray(gyr_b_radps, dtype=np.float64),
-            np.ascontiguousarray(dt_s, dtype=np.float64), np.ascontiguousarray(stance), m, self.par,
+            np.ascontiguousarray(dt_s, dtype=np.float64), np.ascontiguousarray(stance), ratio, m, self.par,
             out_x, out_cov, out_res, out_nis, out_ok, self.counters,
         )  # fmt: skip
         if not out_ok.all():

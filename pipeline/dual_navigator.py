@@ -25,7 +25,7 @@ from pipeline.dual_imu_common import ACC_FULL_SCALE_MPS2, GYR_FULL_SCALE_RADPS
 from pipeline.dual_imu_eskf import DualEskfConfig, DualEskfStream, DualEskfTrack
 from pipeline.eskf import sample_intervals
 from pipeline.nav_types import NavBatch
-from pipeline.navigator import NavStats
+from pipeline.navigator import NavStats, zupt_ratio
 
 F64 = NDArray[np.float64]
 
@@ -168,7 +168,7 @@ class DualNavigator:
         assert self.filter is not None
         dt = sample_intervals(t, self._t_last, self.config.filter.dt_max_s)
         self._t_last = float(t[-1])
-        track = self.filter.step(t, acc, gyr, still, dt)
+        track = self.filter.step(t, acc, gyr, still, dt, zupt_ratio(stat, threshold))
         self.last_track = track
         c = track.counters
         s = self.stats

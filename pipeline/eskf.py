@@ -408,12 +408,16 @@ def _zupt_noise(par: F64, w2: float, ratio: float) -> tuple[float, float]:
     the detector's statistic over its threshold (NaN, inf or above 1, a stance from another source
     than that statistic: 1)."""  # pragma: no cover
     r_h = par[PAR_ZUPT] ** 2 + par[PAR_ROLL_LEVER] ** 2 * w2
-    rho = ratio
-    if not (rho < 1.0):
-        rho = 1.0
-    elif rho < 0.0:
-        rho = 0.0
-    return r_h, r_h + par[PAR_ZUPT_VERT_STAT] ** 2 * rho
+    return r_h, r_h + par[PAR_ZUPT_VERT_STAT] ** 2 * zupt_vertical_weight(ratio)
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def zupt_vertical_weight(ratio: float) -> float:
+    """ρ = T/γ clamped to [0, 1] (NaN, inf or above 1: 1), the weight of σ_T² in the vertical ZUPT
+    noise (module docstring); shared with the dual-IMU filter."""  # pragma: no cover
+    if not (ratio < 1.0):
+        return 1.0
+    return max(ratio, 0.0)
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")

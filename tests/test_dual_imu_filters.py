@@ -30,17 +30,7 @@ def table() -> dict[tuple[str, str], TableRow]:
     return {(r.course, r.method): r for r in rows}
 
 
-_SINGLE_CAUGHT_UP = pytest.mark.xfail(
-    strict=True,
-    reason="not met on the stairs since the single-IMU filter's vertical ZUPT noise follows the detector's T/γ "
-    "(pipeline.eskf; the dual filter has the hard ZUPT): single 0.025 -> 0.018 m mean error, dual 0.020 m "
-    "(0.81 and 0.93 of single on the rectangle, before and after)",
-)
-
-
-@pytest.mark.parametrize(
-    "course", [pytest.param(c, marks=_SINGLE_CAUGHT_UP) if c == "stairs" else c for c in COURSES]
-)
+@pytest.mark.parametrize("course", COURSES)
 def test_footnav_dual_beats_footnav_single_imu(table: dict[tuple[str, str], TableRow], course: str) -> None:
     """The second IMU must pay for itself against footnav's own single-IMU filter (15 states, gated
     ZARU). The reconstructed paper filter does not: it has 2-4x that filter's mean error (README)."""

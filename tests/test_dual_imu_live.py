@@ -19,6 +19,7 @@ from device.raw_imu import RawImuBatch
 from pipeline.detectors import DetectorParams, StreamingDetector
 from pipeline.dual_imu_eskf import run_dual_eskf
 from pipeline.dual_navigator import DualNavConfig, DualNavigator
+from pipeline.navigator import zupt_ratio
 from views.paths import TIMELINE, DualPaths, FootPaths
 
 
@@ -28,8 +29,9 @@ def test_streaming_dual_navigator_equals_the_whole_record_filter_however_batched
     acc, gyr = rec.acc_b_mps2.copy(), rec.gyr_b_radps.copy()
     acc[30_000:30_400, 1] = np.nan  # IMU 2 drops out for 0.4 s
     gyr[30_000:30_400, 1] = np.nan
-    _, _, stance = StreamingDetector(DetectorParams(), 1000.0).update(acc[:, 0].copy(), gyr[:, 0].copy())
-    whole = run_dual_eskf(rec.t_s, acc, gyr, stance, np.asarray(DEFAULT_LEVER_B_M), 1000.0)
+    stat, threshold, stance = StreamingDetector(DetectorParams(), 1000.0).update(acc[:, 0].copy(), gyr[:, 0].copy())
+    lever = np.asarray(DEFAULT_LEVER_B_M)
+    whole = run_dual_eskf(rec.t_s, acc, gyr, stance, lever, 1000.0, zupt_ratio=zupt_ratio(stat, threshold))
     nav = DualNavigator(DualNavConfig(), 1000.0)
     cuts = np.unique(np.concatenate([[0, n], np.random.default_rng(0).integers(1, n, 300)]))
     outs = []

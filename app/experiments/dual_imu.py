@@ -34,7 +34,7 @@ from pipeline.alignment import align_from_still
 from pipeline.detectors import StreamingDetector
 from pipeline.dual_imu_eskf import DualEskfConfig, DualEskfTrack, run_dual_eskf
 from pipeline.dual_imu_paper import DualTrack, PaperConfig, run_paper
-from pipeline.navigator import NavConfig, filter_parameters, navigate
+from pipeline.navigator import NavConfig, filter_parameters, navigate, zupt_ratio
 from pipeline.profiles import UnitProfile, get_profile
 from views.dual_imu import DualRunView, save_dual_runs
 
@@ -131,7 +131,7 @@ def evaluate_run(
     nav_config = NavConfig(profile=profile)
     acc1 = np.ascontiguousarray(rec.acc_b_mps2[:, 0])
     gyr1 = np.ascontiguousarray(rec.gyr_b_radps[:, 0])
-    _, _, stance = StreamingDetector(nav_config.detector, rec.rate_hz).update(acc1, gyr1)
+    stat, threshold, stance = StreamingDetector(nav_config.detector, rec.rate_hz).update(acc1, gyr1)
     n = len(rec.t_s)
     tracks: dict[str, F64] = {}
     nav, _ = navigate(rec.t_s, acc1, gyr1, rec.rate_hz, nav_config)
@@ -147,7 +147,8 @@ def evaluate_run(
         rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, stance, lever, rec.rate_hz, PaperConfig(profile=profile)
     )
     footnav = run_dual_eskf(
-        rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, stance, lever, rec.rate_hz, DualEskfConfig(profile=profile)
+        rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, stance, lever, rec.rate_hz, DualEskfConfig(profile=profile),
+        zupt_ratio(stat, threshold),
     )
     tracks["paper"] = paper.pos1_n_m
     tracks["footnav"] = footnav.pos1_n_m
