@@ -3,11 +3,11 @@
     .venv/bin/python -m benchmarks.zupt_noise [--variants NAME ...] [--seeds 8] [--no-nees] [--data ../shared/data]
 
 Each variant runs the whole navigator (detector, alignment, saturation repair) with
-:func:`run_filter_variant` in place of ``eskf.run_filter`` (``unittest.mock``, as
-``benchmarks.integration_schemes`` does). That filter is ``eskf.run_filter`` with the ZUPT noise
-written out per axis of the navigation frame: σ² = σ_zupt² + (r |ω|)² + e_k[axis], where e_k (n, 3) is
-the variant's extra variance at sample k; a variant may also drop ZUPTs (``skip``). The hard ZUPT
-(e = 0) is the filter before issue 4's change; ``stat-z 0.2`` (e_z = 0.2² · T/γ, the detector's
+:func:`run_filter_variant` in place of ``eskf.run_filter`` (``unittest.mock``, for this probe only).
+That filter is ``eskf.run_filter`` with the ZUPT noise written out per axis of the navigation
+frame: σ² = σ_zupt² + (r |ω|)² + e_k[axis], where e_k (n, 3) is the variant's extra variance at
+sample k; a variant may also drop ZUPTs (``skip``). The hard ZUPT (e = 0) is the filter before
+issue 4's change; ``stat-z 0.2`` (e_z = 0.2² · T/γ, the detector's
 statistic over its threshold) is the present default and reproduces ``eskf.run_filter``.
 
 Variants (``VARIANTS``), all one configuration for every recording:

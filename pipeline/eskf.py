@@ -22,11 +22,11 @@ Nominal state over the interval dt ending at sample k, with ω = ω_k − b_g, f
 the midpoint rule with the sample standing for the middle of its interval (or its mean over it),
 second order; for samples that are instantaneous values at their stamps, as the emulator's are, it
 is the same integration shifted half a sample earlier, and the error of integrating the emulator's
-exact signals still falls as dt² (``tests/test_integration_schemes.py``). The trapezoid of
+exact signals still falls as dt² (``tests/test_filter_static.py``). The trapezoid of
 instantaneous samples (with and without the coning term), Savage's two-sample coning and sculling,
-the Runge-Kutta midpoint method and RK4 were measured against it on every recording
-(``benchmarks.integration_schemes``, README "Accuracy"): none is better on both the real recordings
-and the emulated walks, so the step needs no previous sample.
+the Runge-Kutta midpoint method and RK4 were measured against it on every recording (README
+"Accuracy"): none is better on both the real recordings and the emulated walks, so the step needs no
+previous sample.
 
 Updates while the foot is still: zero velocity (ZUPT, z = 0 − v), then zero angular rate (ZARU,
 z = ω_m − b_g), each in Joseph form followed by injection and reset (Solà §7.3). A stance that
