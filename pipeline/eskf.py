@@ -192,6 +192,24 @@ def _inv3_spd(
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def rotate_attitude_block(P: F64, h0: float, h1: float, h2: float) -> None:
+    """P ← G P Gᵀ in place for G = I except G[θ,θ] = I + [h]× (attitude error at rows/columns 6-8 of
+    the (n, n) ``P``): rows θ, then columns θ. The filter's reset uses h = δθ/2
+    (:func:`inject_attitude_and_reset`), the smoother undoes it with h = −δθ/2."""  # pragma: no cover
+    n = P.shape[0]
+    for j in range(n):
+        a0, a1, a2 = P[TH0, j], P[TH0 + 1, j], P[TH0 + 2, j]
+        P[TH0, j] = a0 + (-h2 * a1 + h1 * a2)
+        P[TH0 + 1, j] = a1 + (h2 * a0 - h0 * a2)
+        P[TH0 + 2, j] = a2 + (-h1 * a0 + h0 * a1)
+    for i in range(n):
+        a0, a1, a2 = P[i, TH0], P[i, TH0 + 1], P[i, TH0 + 2]
+        P[i, TH0] = a0 + (-h2 * a1 + h1 * a2)
+        P[i, TH0 + 1] = a1 + (h2 * a0 - h0 * a2)
+        P[i, TH0 + 2] = a2 + (-h1 * a0 + h0 * a1)
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def inject_attitude_and_reset(x: F64, P: F64, dth0: float, dth1: float, dth2: float) -> None:
     """Inject an attitude error δθ into ``x``'s quaternion (x[6:10], global error: q ← Exp(δθ) q) and
     reset the covariance ``P`` (n, n), attitude error at rows/columns 6-8, in place.
@@ -204,18 +222,7 @@ def inject_attitude_and_reset(x: F64, P: F64, dth0: float, dth1: float, dth2: fl
     qw, qx, qy, qz = quat_mul_s(ew, ex, ey, ez, x[6], x[7], x[8], x[9])
     norm = math.sqrt(qw**2 + qx**2 + qy**2 + qz**2)
     x[6], x[7], x[8], x[9] = qw / norm, qx / norm, qy / norm, qz / norm
-    h0, h1, h2 = 0.5 * dth0, 0.5 * dth1, 0.5 * dth2
-    n = P.shape[0]
-    for j in range(n):
-        a0, a1, a2 = P[TH0, j], P[TH0 + 1, j], P[TH0 + 2, j]
-        P[TH0, j] = a0 + (-h2 * a1 + h1 * a2)
-        P[TH0 + 1, j] = a1 + (h2 * a0 - h0 * a2)
-        P[TH0 + 2, j] = a2 + (-h1 * a0 + h0 * a1)
-    for i in range(n):
-        a0, a1, a2 = P[i, TH0], P[i, TH0 + 1], P[i, TH0 + 2]
-        P[i, TH0] = a0 + (-h2 * a1 + h1 * a2)
-        P[i, TH0 + 1] = a1 + (h2 * a0 - h0 * a2)
-        P[i, TH0 + 2] = a2 + (-h1 * a0 + h0 * a1)
+    rotate_attitude_block(P, 0.5 * dth0, 0.5 * dth1, 0.5 * dth2)
     # outside the θθ block the two sides agree exactly; inside it, average them
     for a in range(3):
         for b in range(a + 1, 3):

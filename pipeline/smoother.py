@@ -65,7 +65,19 @@ from numba import njit
 from numpy.typing import NDArray
 
 from pipeline import eskf
-from pipeline.eskf import BA0, BG0, N_CNT, N_STATE, P0, TH0, V0, _correct, _predict, sample_intervals
+from pipeline.eskf import (
+    BA0,
+    BG0,
+    N_CNT,
+    N_STATE,
+    P0,
+    TH0,
+    V0,
+    _correct,
+    _predict,
+    rotate_attitude_block,
+    sample_intervals,
+)
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavConfig, Navigator, NavStats, nav_batch, zupt_ratio
 from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s
@@ -211,17 +223,7 @@ def _backward_pass(
             dp[TH0], dp[TH0 + 1], dp[TH0 + 2] = _rot_diff_s(xs, xp[k1])
             # P̃ = J Ps Jᵀ, J = I − [ĉ/2]× on θ (inverse of the filter's reset at k+1)
             c0, c1, c2 = _rot_diff_s(xf[k1], xp[k1])
-            h0, h1, h2 = -0.5 * c0, -0.5 * c1, -0.5 * c2
-            for j in range(N_STATE):
-                a0, a1, a2 = Ps[TH0, j], Ps[TH0 + 1, j], Ps[TH0 + 2, j]
-                Ps[TH0, j] = a0 + (-h2 * a1 + h1 * a2)
-                Ps[TH0 + 1, j] = a1 + (h2 * a0 - h0 * a2)
-                Ps[TH0 + 2, j] = a2 + (-h1 * a0 + h0 * a1)
-            for i in range(N_STATE):
-                a0, a1, a2 = Ps[i, TH0], Ps[i, TH0 + 1], Ps[i, TH0 + 2]
-                Ps[i, TH0] = a0 + (-h2 * a1 + h1 * a2)
-                Ps[i, TH0 + 1] = a1 + (h2 * a0 - h0 * a2)
-                Ps[i, TH0 + 2] = a2 + (-h1 * a0 + h0 * a1)
+            rotate_attitude_block(Ps, -0.5 * c0, -0.5 * c1, -0.5 * c2)
             if math.isnan(fn[k1, 0]):
                 # no propagation into k+1: x̂⁻_{k+1} = x̂_k, P⁻_{k+1} = P_k, C = I
                 for i in range(N_STATE):
