@@ -56,7 +56,7 @@ signals most of the height loss came from stance samples inside the emulator's h
 transient (README "Accuracy"). The same soft update on all three axes, or a vertical one that
 decays with the time since stance began, or one that grows with the specific force's deviation
 from g instead of T/γ, were measured on every recording and did worse as a whole
-(``benchmarks.zupt_noise``, README "Accuracy").
+(README "Accuracy"; the probe is in the history: ``git show aa8703a:benchmarks/zupt_noise.py``).
 
 The covariance propagation multiplies only the non-identity blocks of F and writes one triangle
 (about 800 multiply-adds per sample instead of 2 × 15³); the updates observe three states each, so

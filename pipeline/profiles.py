@@ -40,7 +40,7 @@ class UnitProfile:
         zupt_vertical_sigma_mps: σ_T, the extra 1σ of the ZUPT's vertical component where the
             detector's statistic reaches its threshold; it scales as √(T/γ) below it (see
             ``pipeline.eskf``: the heel pad and sole still compress as stance begins). Measured
-            with 0.1, 0.15, 0.2 and 0.3 m/s (``benchmarks.zupt_noise``, README "Accuracy"): each
+            with 0.1, 0.15, 0.2 and 0.3 m/s (README "Accuracy"): each
             lowers the PyShoe mean ATE-3D, both closed loops' 3D error and the emulated walks' end
             errors; 0.2 m/s balances them. 0 gives the hard update of before.
     """
