@@ -413,9 +413,11 @@ class TofAiding:
 
     def _finish_level(self, P: F64) -> None:
         """Fix a new level at the end of its first stance and re-anchor the vertical position error
-        to it (module docstring)."""
+        to it (module docstring); with ``use`` off only the level is kept (the state is not touched)."""
         self._provisional = False
         self.levels_z_m[-1] = self.floor_z_m = self._stance_z
+        if not self.config.use:
+            return
         P[2, :] = 0.0
         P[:, 2] = 0.0
         P[2, 2] = self.config.new_level_sigma_m**2

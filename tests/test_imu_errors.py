@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from device.emulator.imu_errors import IMU_GRADES, ImuGrade, corrupt, gauss_markov
+from device.emulator.imu_errors import AXIS_ERRORS, IMU_GRADES, ImuGrade, corrupt, gauss_markov
 
 NOISY_GRADES = [name for name in IMU_GRADES if name != "ideal"]
 
@@ -33,9 +33,7 @@ def test_measurement_is_truth_plus_bias_plus_noise() -> None:
     truth_acc = rng.normal(size=(5000, 3))
     truth_gyr = rng.normal(size=(5000, 3))
     acc, gyr, applied = corrupt(truth_acc, truth_gyr, 1000.0, "mpu6500x4", seed=2)
-    np.testing.assert_allclose(
-        acc, truth_acc + applied.acc_bias_b_mps2 + applied.acc_noise_b_mps2, rtol=0, atol=1e-15
-    )
+    np.testing.assert_allclose(acc, truth_acc + applied.acc_bias_b_mps2 + applied.acc_noise_b_mps2, rtol=0, atol=1e-15)
     np.testing.assert_allclose(
         gyr, truth_gyr + applied.gyr_bias_b_radps + applied.gyr_noise_b_radps, rtol=0, atol=1e-15
     )
@@ -170,3 +168,28 @@ def test_gyroscope_delay_reads_the_true_rate_earlier() -> None:
     np.testing.assert_array_equal(app_a.gyr_noise_b_radps, app_b.gyr_noise_b_radps)
     with pytest.raises(ValueError, match="finite"):
         corrupt(zeros, truth_gyr, rate_hz, "ideal", seed=1, gyr_delay_s=float("nan"))
+
+
+def test_axis_errors_multiply_the_truth_and_leave_biases_and_noise_as_they_were() -> None:
+    rng = np.random.default_rng(3)
+    truth_acc = rng.normal(size=(4000, 3))
+    truth_gyr = rng.normal(size=(4000, 3))
+    plain_acc, plain_gyr, plain = corrupt(truth_acc, truth_gyr, 1000.0, "mpu6500x4", seed=4)
+    acc, gyr, applied = corrupt(truth_acc, truth_gyr, 1000.0, "mpu6500x4", seed=4, axes="gyro-bias-calibrated")
+    np.testing.assert_array_equal(plain.acc_axes, np.eye(3))
+    np.testing.assert_array_equal(applied.gyr_noise_b_radps, plain.gyr_noise_b_radps)
+    np.testing.assert_array_equal(applied.acc_bias_b_mps2, plain.acc_bias_b_mps2)
+    np.testing.assert_allclose(acc - plain_acc, truth_acc @ (applied.acc_axes - np.eye(3)).T, atol=1e-13)
+    np.testing.assert_allclose(gyr - plain_gyr, truth_gyr @ (applied.gyr_axes - np.eye(3)).T, atol=1e-13)
+
+
+def test_axis_error_spread_across_seeds_matches_the_setting() -> None:
+    axes = AXIS_ERRORS["gyro-bias-calibrated"]
+    gyr = np.array([axes.draw(seed)[1] for seed in range(300)])
+    scale = gyr[:, [0, 1, 2], [0, 1, 2]] - 1.0
+    cross = gyr[:, [0, 0, 1, 1, 2, 2], [1, 2, 0, 2, 0, 1]]
+    assert scale.std() == pytest.approx(axes.gyr_scale_sigma, rel=0.08)
+    assert cross.std() == pytest.approx(axes.gyr_cross_axis_sigma, rel=0.08)
+    np.testing.assert_array_equal(axes.draw(7)[0], axes.draw(7)[0])
+    with pytest.raises(ValueError, match="unknown axis errors"):
+        corrupt(np.zeros((2, 3)), np.zeros((2, 3)), 1000.0, "ideal", seed=0, axes="factory")

@@ -26,10 +26,12 @@ def stairs70() -> exp.Recording:
 
 
 def test_70s_walk_meets_the_issue_figures(walk70: exp.Recording) -> None:
+    """The platform's unit (gyroscope bias calibrated, datasheet scale and cross-axis errors left):
+    ZUPT alone 29.3 cm at footfalls, ToF 0.13 cm (226x lower), horizontal unchanged."""
     zupt, tof = exp.compare(walk70)
     assert tof.clearance_rms_m <= 0.01
-    assert tof.z_stance_rms_m <= 0.0012  # 1.09 mm (1.05 mm before the vertical ZUPT noise followed T/γ)
-    assert zupt.z_stance_rms_m >= 3.5 * tof.z_stance_rms_m
+    assert tof.z_stance_rms_m <= 0.0015  # 1.3 mm
+    assert zupt.z_stance_rms_m >= 5.0 * tof.z_stance_rms_m
     assert tof.xy_stance_rms_m <= zupt.xy_stance_rms_m
     assert tof.readings["used"] > 0.75 * len(walk70.ranges)
     assert zupt.readings == {}
@@ -37,12 +39,12 @@ def test_70s_walk_meets_the_issue_figures(walk70: exp.Recording) -> None:
 
 @pytest.mark.xfail(
     strict=True,
-    reason="not met since the vertical ZUPT noise follows the detector's T/γ (pipeline.eskf): ZUPT alone went "
-    "from 6.8 to 4.4 mm at footfalls on this walk, ToF stayed at 1.1 mm, 4.0x lower (6.5x before); seeds 1-8: "
-    "ZUPT alone 14.3 -> 11.8 mm mean, ToF 1.23 -> 1.27 mm",
+    reason="with no axis errors at all (noise and biases only) ZUPT alone loses only 4.4 mm at footfalls on this "
+    "walk, and ToF at its noise floor (1.1 mm) is 4.0x lower; seeds 1-8 1.2-21x (5x with 5 of 8). Real "
+    "recordings drift 50-100x more than such a unit (README Accuracy)",
 )
-def test_70s_walk_vertical_error_5x_lower(walk70: exp.Recording) -> None:
-    zupt, tof = exp.compare(walk70)
+def test_70s_walk_vertical_error_5x_lower_on_a_unit_without_axis_errors() -> None:
+    zupt, tof = exp.compare(exp.record("rectangle", 70.0, seed=1, axes="none"))
     assert zupt.z_stance_rms_m >= 5.0 * tof.z_stance_rms_m
 
 
@@ -61,8 +63,9 @@ def test_stairs_floor_is_followed_and_never_gone_through(stairs70: exp.Recording
 
 @pytest.mark.xfail(
     strict=True,
-    reason="not met on stairs: clearance 1.08 cm RMS (1.02-1.18 cm with seeds 1-8); near each step edge the "
-    "floor under the IMU is known only to lie between the last hits on either side (3-10 cm apart in swing)",
+    reason="not met on stairs: clearance 1.16 cm RMS (1.03-1.38 cm with seeds 1-8; 1.02-1.21 cm with no axis "
+    "errors); near each step edge the floor under the IMU is known only to lie between the last hits on either "
+    "side (3-10 cm apart in swing)",
 )
 def test_stairs_clearance_within_1cm(stairs70: exp.Recording) -> None:
     _, tof = exp.compare(stairs70)
@@ -70,24 +73,24 @@ def test_stairs_clearance_within_1cm(stairs70: exp.Recording) -> None:
 
 
 def test_stairs_clearance_near_step_edges_is_interpolated_and_learned(stairs70: exp.Recording) -> None:
-    """Regression guard: 1.51 cm RMS with the nearest hit's floor, 1.20 cm interpolated between the hits
-    on either side of an edge, 1.08 cm with the edges learned in earlier swings."""
+    """Regression guard: on the unit without axis errors 1.51 cm RMS with the nearest hit's floor, 1.20 cm
+    interpolated between the hits on either side of an edge, 1.08 cm with the edges learned in earlier swings;
+    1.16 cm on this walk's unit."""
     _, tof = exp.compare(stairs70)
-    assert tof.clearance_rms_m <= 0.0115
+    assert tof.clearance_rms_m <= 0.012
 
 
 _NOT_5X = pytest.mark.xfail(
     strict=True,
-    reason="not met on stairs: vertical error at footfalls 0.3-3.5x lower than ZUPT alone with seeds 1-8 "
-    "(seeds 1, 2, 3: 0.6x, 2.7x, 1.1x; ZUPT alone 4.9, 3.2, 21.1 mm, ToF 8.0, 1.2, 19.0 mm; means over seeds "
-    "1-8 9.4 and 8.4 mm). Each new tread is placed at the state's height, i.e. with the inertial drift of the "
-    "climb so far. Before the vertical ZUPT noise followed T/γ (pipeline.eskf): 1.0-2.0x with seeds 2-8, 5.7x "
-    "with seed 1, means 14.1 and 10.3 mm; ZUPT alone then drifted about 2 mm per stride up the emulated flight "
-    "even with error-free IMU signals, now 1.7 mm in the whole 60 s walk",
+    reason="not met on stairs with every walk: vertical error at footfalls 1.3x lower than ZUPT alone with seed 3 "
+    "(2.54 vs 1.91 cm), 6.0-27x with seeds 1, 2, 4-8. Each new tread is placed at the state's height, i.e. "
+    "with the inertial drift of the climb so far, so the ToF's own error on stairs is 0.5-1.9 cm; where ZUPT "
+    "alone drifts little (seed 3: 2.5 cm in 70 s) that is not five times less. With no axis errors ZUPT alone "
+    "loses 0.3-2.1 cm and the ratio is 0.6-2.7x",
 )
 
 
-@pytest.mark.parametrize("seed", [pytest.param(seed, marks=_NOT_5X) for seed in (1, 2, 3)])
+@pytest.mark.parametrize("seed", [1, 2, pytest.param(3, marks=_NOT_5X)])
 def test_stairs_vertical_error_5x_lower(seed: int) -> None:
     zupt, tof = exp.compare(exp.record("stairs", 70.0, seed=seed))
     assert zupt.z_stance_rms_m >= 5.0 * tof.z_stance_rms_m
@@ -163,27 +166,12 @@ def test_bad_input_is_gated_counted_and_never_pulls_through_the_floor() -> None:
     assert np.sqrt(np.mean(err_z**2)) < 0.2 * np.sqrt(np.mean(err_z0**2))
 
 
-_NOT_NO_WORSE = pytest.mark.xfail(
-    strict=True,
-    reason="not met with this walk: walk 3 2.45 vs 2.11 cm (ZUPT alone), walk 4 0.97 vs 0.68 cm; walks 1, 2, 5: "
-    "0.14 vs 0.49, 0.22 vs 0.32, 1.04 vs 0.71 cm (mean of the five 0.96 vs 0.86). Before the vertical ZUPT "
-    "noise followed T/γ (pipeline.eskf): 0.75 vs 1.17, 0.58 vs 0.97, 1.76 vs 1.35, 1.66 vs 1.85, 1.75 vs 1.77 cm "
-    "(mean 1.30 vs 1.42): ToF got better, ZUPT alone more so. A tread is placed at the state's height at the end "
-    "of its first stance, and readings let through in the swings before it still move the state",
-)
-
-
-@pytest.mark.parametrize(
-    "seed",
-    [
-        1,
-        2,
-        pytest.param(3, marks=_NOT_NO_WORSE),
-        pytest.param(4, marks=_NOT_NO_WORSE),
-    ],
-)
+@pytest.mark.parametrize("seed", [1, 2, 3, 4])
 def test_bad_input_on_stairs_is_no_worse_than_zupt_alone(seed: int) -> None:
-    """Stairs, 20 % time-outs, 10 % reflections, odd readings: the vertical error at footfalls."""
+    """Stairs, 20 % time-outs, 10 % reflections, odd readings: the vertical error at footfalls (walks 1-5:
+    0.42 vs 13.90, 0.86 vs 13.64, 2.48 vs 2.54, 1.50 vs 21.24, 0.69 vs 18.82 cm with ZUPT alone). With no axis
+    errors (ZUPT alone then loses 0.3-2 cm) walks 3 and 4 were worse than ZUPT alone: 2.45 vs 2.11, 0.97 vs
+    0.68 cm."""
     rec, ranges = _bad_recording("stairs", seed)
     t = rec.truth
     zupt, _ = navigate(t.t_s, rec.acc_b_mps2, rec.gyr_b_radps, t.rate_hz)

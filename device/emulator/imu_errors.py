@@ -32,7 +32,14 @@ Random-walk coefficients (ARW in °/√h, VRW in m/s/√h, i.e. the Allan deviat
 the one-sided density by ``density = √2 × N``; with that, integrating the simulated noise gives an
 angle (velocity) random walk of exactly ``N √t``.
 
-No scale-factor, misalignment, g-sensitivity, quantisation or temperature effects are modelled.
+Optionally (:class:`AxisErrors`, ``corrupt(..., axes=...)``) each sensor's true signal first goes
+through a fixed axis-error matrix ``M = (I + diag(s)) + N``: per-axis scale-factor errors ``s`` and
+cross-axis sensitivities ``N`` (zero diagonal; ``N_ij`` is the fraction of axis j's input read by
+axis i, as datasheets define cross-axis sensitivity), drawn once per run. The measured signal is
+then ``y_k = M x_k + b_0 + d_k + w_k``. These are the errors a calibration removes; what is left of
+them after the calibration a unit had is what :data:`AXIS_ERRORS` holds. No g-sensitivity,
+nonlinearity, quantisation or temperature effects are modelled here (the temperature model of the
+accelerometer is :class:`device.emulator.icosahedron.Miscalibration`).
 
 References
 ----------
@@ -163,6 +170,61 @@ IMU_GRADES: dict[str, ImuGrade] = {
 
 
 @dataclass(frozen=True, slots=True)
+class AxisErrors:
+    """Scale-factor and cross-axis errors of one unit's sensors, 1σ per element (dimensionless).
+
+    Attributes:
+        name: short identifier (the key in :data:`AXIS_ERRORS`).
+        acc_scale_sigma: accelerometer scale-factor error per axis (0.01 = 1 %).
+        acc_cross_axis_sigma: accelerometer cross-axis sensitivity per off-diagonal element.
+        gyr_scale_sigma: gyroscope scale-factor error per axis.
+        gyr_cross_axis_sigma: gyroscope cross-axis sensitivity per off-diagonal element.
+    """
+
+    name: str
+    acc_scale_sigma: float
+    acc_cross_axis_sigma: float
+    gyr_scale_sigma: float
+    gyr_cross_axis_sigma: float
+
+    def draw(self, seed: int) -> tuple[F64, F64]:
+        """(accelerometer, gyroscope) (3, 3) axis-error matrices ``M`` of the run seeded ``seed``.
+
+        Drawn from their own stream (``default_rng([seed, 1])``), so adding axis errors leaves the
+        biases and noise of the same seed unchanged."""
+        rng = np.random.default_rng([seed, 1])
+        off = 1.0 - np.eye(3)
+        mats = []
+        for scale, cross in (
+            (self.acc_scale_sigma, self.acc_cross_axis_sigma),
+            (self.gyr_scale_sigma, self.gyr_cross_axis_sigma),
+        ):
+            mats.append(np.eye(3) + np.diag(scale * rng.standard_normal(3)) + cross * off * rng.standard_normal((3, 3)))
+        return mats[0], mats[1]
+
+
+AXIS_ERRORS: dict[str, AxisErrors] = {
+    "none": AxisErrors("none", 0.0, 0.0, 0.0, 0.0),
+    # A consumer MEMS unit whose accelerometer was calibrated on the icosahedron jig (15 parameters,
+    # as the multi-sensor shoe platform does; footnav's procedure leaves at most 0.011 % scale and
+    # 0.0074° misalignment on the emulated unit, README "Calibration") and whose gyroscope had only
+    # its bias calibrated (the platform calibrates gyroscope bias alone). The gyroscope keeps its
+    # datasheet tolerances: MPU-6500 (PS-MPU-6500A-01 rev 1.1) sensitivity scale factor tolerance
+    # ±3 % and cross-axis sensitivity ±2 %, taken here as 3σ (an assumption: the datasheet gives
+    # them as typical limits without a distribution). The accelerometer residual is taken as 0.01 %
+    # scale and 0.02 % (0.011°) cross-axis, 1σ.
+    "gyro-bias-calibrated": AxisErrors(
+        "gyro-bias-calibrated",
+        acc_scale_sigma=1e-4,
+        acc_cross_axis_sigma=2e-4,
+        gyr_scale_sigma=0.03 / 3.0,
+        gyr_cross_axis_sigma=0.02 / 3.0,
+    ),
+}
+"""Named axis-error (calibration residual) settings; sources and assumptions per entry."""
+
+
+@dataclass(frozen=True, slots=True)
 class ImuErrorsApplied:
     """The errors :func:`corrupt` added, so that tests and evaluations can subtract or check them.
 
@@ -175,6 +237,8 @@ class ImuErrorsApplied:
         gyr_turn_on_bias_b_radps: (3,) gyroscope turn-on bias, rad/s.
         acc_noise_b_mps2: (n, 3) accelerometer white noise added, m/s².
         gyr_noise_b_radps: (n, 3) gyroscope white noise added, rad/s.
+        acc_axes: (3, 3) accelerometer axis-error matrix applied (identity: none).
+        gyr_axes: (3, 3) gyroscope axis-error matrix applied.
     """
 
     grade: ImuGrade
@@ -185,6 +249,8 @@ class ImuErrorsApplied:
     gyr_turn_on_bias_b_radps: F64
     acc_noise_b_mps2: F64
     gyr_noise_b_radps: F64
+    acc_axes: F64
+    gyr_axes: F64
 
 
 def gauss_markov(
@@ -259,6 +325,7 @@ def corrupt(
     seed: int,
     *,
     gyr_delay_s: float = 0.0,
+    axes: AxisErrors | str = "none",
 ) -> tuple[F64, F64, ImuErrorsApplied]:
     """Add a grade's errors to true IMU signals.
 
@@ -277,6 +344,9 @@ def corrupt(
     gyr_delay_s : float
         The gyroscope lags the accelerometer by this much, s (module docstring; 0: no delay, the
         default). Biases and noise are added after the delay.
+    axes : AxisErrors or str
+        Scale-factor and cross-axis errors (or a key of :data:`AXIS_ERRORS`), applied to the true
+        signals first (module docstring). Default ``"none"``.
 
     Returns
     -------
@@ -290,34 +360,38 @@ def corrupt(
     Raises
     ------
     ValueError
-        On an unknown grade name, mismatched or non-(n, 3) inputs, or a non-positive rate.
+        On an unknown grade or axis-error name, mismatched or non-(n, 3) inputs, or a non-positive rate.
     """
     if isinstance(grade, str):
         try:
             grade = IMU_GRADES[grade]
         except KeyError:
             raise ValueError(f"unknown IMU grade {grade!r}; expected one of {sorted(IMU_GRADES)}") from None
+    if isinstance(axes, str):
+        try:
+            axes = AXIS_ERRORS[axes]
+        except KeyError:
+            raise ValueError(f"unknown axis errors {axes!r}; expected one of {sorted(AXIS_ERRORS)}") from None
     acc_in = np.asarray(truth_acc_b, dtype=np.float64)
     gyr_in = np.asarray(truth_gyr_b, dtype=np.float64)
     if acc_in.ndim != 2 or acc_in.shape[1] != 3 or acc_in.shape != gyr_in.shape:
-        raise ValueError(
-            f"expected two (n, 3) arrays of the same shape, got {acc_in.shape} and {gyr_in.shape}"
-        )
+        raise ValueError(f"expected two (n, 3) arrays of the same shape, got {acc_in.shape} and {gyr_in.shape}")
     if not rate_hz > 0.0:
         raise ValueError(f"sample rate must be positive, got {rate_hz} Hz")
     if not math.isfinite(gyr_delay_s):
         raise ValueError(f"gyroscope delay must be finite, got {gyr_delay_s} s")
+    acc_axes, gyr_axes = axes.draw(seed)
+    if not np.array_equal(acc_axes, np.eye(3)):
+        acc_in = acc_in @ acc_axes.T
+    if not np.array_equal(gyr_axes, np.eye(3)):
+        gyr_in = gyr_in @ gyr_axes.T
     gyr_in = delayed(gyr_in, rate_hz, gyr_delay_s)
     n = acc_in.shape[0]
     rng = np.random.default_rng(seed)
     acc_turn_on = grade.acc_bias_sigma_mps2 * rng.standard_normal(3)
     gyr_turn_on = grade.gyr_bias_sigma_radps * rng.standard_normal(3)
-    acc_drift = gauss_markov(
-        n, grade.acc_bias_instability_mps2, grade.bias_correlation_time_s, rate_hz, rng=rng
-    )
-    gyr_drift = gauss_markov(
-        n, grade.gyr_bias_instability_radps, grade.bias_correlation_time_s, rate_hz, rng=rng
-    )
+    acc_drift = gauss_markov(n, grade.acc_bias_instability_mps2, grade.bias_correlation_time_s, rate_hz, rng=rng)
+    gyr_drift = gauss_markov(n, grade.gyr_bias_instability_radps, grade.bias_correlation_time_s, rate_hz, rng=rng)
     acc_noise = grade.acc_noise_sigma_mps2(rate_hz) * rng.standard_normal((n, 3))
     gyr_noise = grade.gyr_noise_sigma_radps(rate_hz) * rng.standard_normal((n, 3))
     acc_bias = acc_turn_on + acc_drift
@@ -331,5 +405,7 @@ def corrupt(
         gyr_turn_on_bias_b_radps=gyr_turn_on,
         acc_noise_b_mps2=acc_noise,
         gyr_noise_b_radps=gyr_noise,
+        acc_axes=acc_axes,
+        gyr_axes=gyr_axes,
     )
     return acc_in + acc_bias + acc_noise, gyr_in + gyr_bias + gyr_noise, applied
