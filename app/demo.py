@@ -84,6 +84,8 @@ class DemoOptions:
     duration_s: float = 60.0
     speed_mps: float = 1.4
     grade: str = "mpu6500x4"
+    axes: str = "none"
+    """Scale-factor and cross-axis errors of the emulated IMU(s) (a key of ``AXIS_ERRORS``)."""
     save: Path | None = None
     viewer: bool = True
     realtime: float = 1.0  # emulator pace: 1 = real time, math.inf = as fast as possible
@@ -157,7 +159,12 @@ def demo_truth(opts: DemoOptions, foot_index: int) -> tuple[GaitTruth, NDArray[n
         )
         return truth, acc, gyr
     acc, gyr, _ = corrupt(
-        truth.acc_b_mps2, truth.gyr_b_radps, truth.rate_hz, IMU_GRADES[opts.grade], seed=opts.seed + foot_index
+        truth.acc_b_mps2,
+        truth.gyr_b_radps,
+        truth.rate_hz,
+        IMU_GRADES[opts.grade],
+        seed=opts.seed + foot_index,
+        axes=opts.axes,
     )
     return truth, acc, gyr
 
@@ -171,7 +178,12 @@ def dual_demo_truth(opts: DemoOptions) -> tuple[GaitTruth, NDArray[np.float64], 
     gyr = np.empty_like(board.gyr_b_radps)
     for i in range(2):
         acc[:, i], gyr[:, i], _ = corrupt(
-            board.acc_b_mps2[:, i], board.gyr_b_radps[:, i], truth.rate_hz, IMU_GRADES[opts.grade], seed=opts.seed + i
+            board.acc_b_mps2[:, i],
+            board.gyr_b_radps[:, i],
+            truth.rate_hz,
+            IMU_GRADES[opts.grade],
+            seed=opts.seed + i,
+            axes=opts.axes,
         )
     return truth, acc, gyr
 
@@ -193,12 +205,14 @@ def run_demo(opts: DemoOptions) -> int:
         raise ValueError(f"the demo emulates 1 or 2 feet, not {opts.feet}")
     if opts.dual_imu and opts.feet != 1:
         raise ValueError("the dual-IMU demo emulates one shoe")
+    if opts.miscalibrated and opts.axes != "none":
+        raise ValueError("the miscalibrated unit has its own scale and misalignment errors; drop --axis-errors")
     feet = ("foot",) if opts.feet == 1 else ("left", "right")
     truths = [dual_demo_truth(opts)] if opts.dual_imu else [demo_truth(opts, k) for k in range(len(feet))]
     truth = truths[0][0]
     board = " with a dual-IMU board" if opts.dual_imu else ""
     print(
-        f"footnav demo: {len(feet)} emulated shoe(s){board} ({opts.grade}), {opts.path} walk, "
+        f"footnav demo: {len(feet)} emulated shoe(s){board} ({opts.grade}, axis errors {opts.axes}), {opts.path} walk, "
         f"{opts.duration_s:.0f} s at {opts.speed_mps:.1f} m/s, 1 kHz over a pseudo-terminal",
         file=sys.stderr,
     )
@@ -246,7 +260,7 @@ def run_demo(opts: DemoOptions) -> int:
             PtyShoeServer(t.t_s, acc, gyr, speed=opts.realtime, record=False, mcu_id=mcu_id, tof=tof, baro=baro)
             for (t, acc, gyr), (tof, baro) in zip(truths, ext, strict=True)
         ]
-    extra = {"command": "footnav demo", "emulator": f"{opts.path} {opts.grade}"}
+    extra = {"command": "footnav demo", "emulator": f"{opts.path} {opts.grade} axes {opts.axes}"}
     capture = open_capture(cfg, session_id, enabled=opts.capture, extra=extra)
     status = StatusLine(feet=feet)
     nav_config = cfg.nav_config()

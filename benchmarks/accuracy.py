@@ -1,11 +1,13 @@
 """Accuracy table of every recording with ground truth, causal and RTS-smoothed, in one command.
 
-    .venv/bin/python -m benchmarks.accuracy [--data ../shared/data] [--no-emulator] [--no-smooth]
+    .venv/bin/python -m benchmarks.accuracy [--data ../shared/data] [--no-emulator] [--no-smooth] [--no-real]
+        [--axis-errors none|gyro-bias-calibrated]
 
 Real recordings (``../shared/data``, see its DATA.md): the PyShoe VICON trials (ARMSE-2D as the
 PyShoe authors compute it, ``pipeline.metrics.armse_2d_pyshoe``, and ATE-3D after a yaw +
 translation fit), the x-io and OpenShoe closed loops (loop closure 3D and 2D). Emulated walks
-(``device.emulator``, MPU-6500-class errors, the seeds of ``tests/test_accuracy.py``): end-point error
+(``device.emulator``, MPU-6500-class errors, the seeds of ``tests/test_accuracy.py``; ``--axis-errors``
+adds scale-factor and cross-axis errors, ``device.emulator.imu_errors.AXIS_ERRORS``): end-point error
 as % of distance for the rectangle, figure-eight and stairs, and the filter's consistency, the mean
 NEES of the 3D position (error ᵀ P⁻¹ error over all samples; for a consistent filter its mean is 3,
 Bar-Shalom, Li, Kirubarajan, "Estimation with Applications to Tracking and Navigation", 2001,
@@ -27,7 +29,7 @@ import numpy as np
 
 from app.evaluate import evaluate_file, find_recordings
 from device.emulator.gait import simulate_walk
-from device.emulator.imu_errors import corrupt
+from device.emulator.imu_errors import AXIS_ERRORS, corrupt
 from pipeline.navigator import NavConfig, navigate
 from pipeline.profiles import get_profile
 
@@ -44,10 +46,10 @@ def real_rows(data: Path, smooth: bool) -> list[tuple[str, str, float, float, fl
     return rows
 
 
-def emulated_row(path: str, duration_s: float, seed: int) -> tuple[float, float, float]:
+def emulated_row(path: str, duration_s: float, seed: int, axes: str = "none") -> tuple[float, float, float]:
     """(end-point error % of distance, final vertical error m, mean position NEES) of one emulated walk."""
     truth = simulate_walk(path, duration_s, rate_hz=1000.0, seed=0)
-    acc, gyr, _ = corrupt(truth.acc_b_mps2, truth.gyr_b_radps, truth.rate_hz, "mpu6500x4", seed=seed)
+    acc, gyr, _ = corrupt(truth.acc_b_mps2, truth.gyr_b_radps, truth.rate_hz, "mpu6500x4", seed=seed, axes=axes)
     nav, _ = navigate(truth.t_s, acc, gyr, truth.rate_hz, NavConfig(profile=get_profile("mpu6500x4")))
     assert nav is not None
     true_pos = truth.pos_n_m[-len(nav) :]
@@ -70,17 +72,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
     ap.add_argument("--no-emulator", action="store_true")
     ap.add_argument("--no-smooth", action="store_true")
+    ap.add_argument("--no-real", action="store_true", help="the emulated walks only")
+    ap.add_argument("--axis-errors", choices=sorted(AXIS_ERRORS), default="none", help="of the emulated IMU")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
-    modes = [False] if args.no_smooth else [False, True]
+    modes = [] if args.no_real else [False] if args.no_smooth else [False, True]
     results = {m: real_rows(args.data, m) for m in modes}
-    print(
-        f"{'recording':<22} {'format':<8} "
-        + " ".join(
-            f"{h:>7}" for m in modes for h in (("s." if m else "") + x for x in ("ARMSE", "ATE3D", "loop3D", "loop2D"))
+    if modes:
+        print(
+            f"{'recording':<22} {'format':<8} "
+            + " ".join(
+                f"{h:>7}"
+                for m in modes
+                for h in (("s." if m else "") + x for x in ("ARMSE", "ATE3D", "loop3D", "loop2D"))
+            )
         )
-    )
-    for i, row in enumerate(results[False]):
+    for i, row in enumerate(results.get(False, [])):
         cells = []
         for m in modes:
             cells += [_f(v) for v in results[m][i][2:]]
@@ -95,9 +102,9 @@ def main(argv: list[str] | None = None) -> int:
         )
     if not args.no_emulator:
         for path, dur, seed in EMULATED:
-            pct, dz, nees = emulated_row(path, dur, seed)
+            pct, dz, nees = emulated_row(path, dur, seed, args.axis_errors)
             print(
-                f"emulated {path:<10} end error {pct:.3f} % of distance, final dz {dz:+.3f} m, "
+                f"emulated {path:<10} ({args.axis_errors}) end error {pct:.3f} % of distance, final dz {dz:+.3f} m, "
                 f"mean NEES(pos) {nees:.2f}"
             )
     print(f"({time.perf_counter() - t0:.0f} s)")

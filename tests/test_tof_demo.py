@@ -30,7 +30,15 @@ def test_demo_with_tof_sensors_live_and_replayed(tmp_path: Path) -> None:
     cfg.set("session.sessions_dir", str(tmp_path), "test")
     got, make = _collector()
     opts = DemoOptions(
-        path="line", duration_s=25.0, viewer=False, realtime=math.inf, config=cfg, collect=make, tof=True, stance="and"
+        path="line",
+        duration_s=25.0,
+        viewer=False,
+        realtime=math.inf,
+        config=cfg,
+        collect=make,
+        tof=True,
+        stance="and",
+        axes="gyro-bias-calibrated",
     )
     assert run_demo(opts) == 0
     live = concat_batches(got["foot"])
