@@ -211,8 +211,9 @@ def run_demo(opts: DemoOptions) -> int:
     truths = [dual_demo_truth(opts)] if opts.dual_imu else [demo_truth(opts, k) for k in range(len(feet))]
     truth = truths[0][0]
     board = " with a dual-IMU board" if opts.dual_imu else ""
+    axes = "" if opts.axes == "none" else f", axis errors {opts.axes}"
     print(
-        f"footnav demo: {len(feet)} emulated shoe(s){board} ({opts.grade}, axis errors {opts.axes}), {opts.path} walk, "
+        f"footnav demo: {len(feet)} emulated shoe(s){board} ({opts.grade}{axes}), {opts.path} walk, "
         f"{opts.duration_s:.0f} s at {opts.speed_mps:.1f} m/s, 1 kHz over a pseudo-terminal",
         file=sys.stderr,
     )
