@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from device.emulator.dual_imu import DEFAULT_GRADE, DEFAULT_LEVER_B_M, DualImuRecording, simulate_dual_imu
+from device.emulator.imu_errors import AXIS_ERRORS
 from pipeline import eskf
 from pipeline.alignment import align_from_still
 from pipeline.detectors import StreamingDetector
@@ -124,9 +125,10 @@ def evaluate_run(
     *,
     lever_b_m: tuple[float, float, float] = DEFAULT_LEVER_B_M,
     grade: str = DEFAULT_GRADE,
+    axes: str = "none",
 ) -> RunResult:
     """Walk ``course`` once with seed ``seed`` and navigate it with every method."""
-    rec = simulate_dual_imu(course, seed=seed, lever_b_m=lever_b_m, grade=grade)
+    rec = simulate_dual_imu(course, seed=seed, lever_b_m=lever_b_m, grade=grade, axes=axes)
     profile = get_profile(PROFILE)
     nav_config = NavConfig(profile=profile)
     acc1 = np.ascontiguousarray(rec.acc_b_mps2[:, 0])
@@ -184,7 +186,11 @@ class TableRow:
 
 
 def error_table(
-    seeds: list[int], courses: tuple[str, ...] = COURSES, *, first_runs: dict[str, RunResult] | None = None
+    seeds: list[int],
+    courses: tuple[str, ...] = COURSES,
+    *,
+    first_runs: dict[str, RunResult] | None = None,
+    axes: str = "none",
 ) -> list[TableRow]:
     """Run every course and seed; average the per-run max and mean errors over the seeds.
 
@@ -192,7 +198,7 @@ def error_table(
     """
     rows: list[TableRow] = []
     for course in courses:
-        runs = [evaluate_run(course, s) for s in seeds]
+        runs = [evaluate_run(course, s, axes=axes) for s in seeds]
         if first_runs is not None:
             first_runs[course] = runs[0]
         mx = {m: float(np.mean([r.max_error_m[m] for r in runs])) for m in METHODS}
@@ -203,7 +209,7 @@ def error_table(
     return rows
 
 
-def format_table(rows: list[TableRow], seeds: list[int]) -> str:
+def format_table(rows: list[TableRow], seeds: list[int], axes: str = "none") -> str:
     """The table as text, with the methods spelled out underneath."""
     lines = [
         f"position error of IMU 1 (3D, every sample), mean over seeds {seeds[0]}..{seeds[-1]} ({len(seeds)} runs "
@@ -219,7 +225,8 @@ def format_table(rows: list[TableRow], seeds: list[int]) -> str:
     lines += [f"{m:<8} {LABELS[m]}" for m in METHODS]
     lines.append(
         "same record and same stance samples for all (SHOE detector, adaptive threshold, on IMU 1); "
-        f"IMUs: {DEFAULT_GRADE} grade, independent errors; lever arm {DEFAULT_LEVER_B_M} m; filter profile {PROFILE!r}"
+        f"IMUs: {DEFAULT_GRADE} grade, axis errors {axes!r}, independent errors; lever arm {DEFAULT_LEVER_B_M} m; "
+        f"filter profile {PROFILE!r}"
     )
     return "\n".join(lines)
 
@@ -231,14 +238,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--save", type=Path, default=None, metavar="FILE.rrd", help="also write the first seed's runs to a recording"
     )
+    parser.add_argument(
+        "--axis-errors",
+        choices=sorted(AXIS_ERRORS),
+        default="none",
+        help="scale-factor and cross-axis errors of both emulated IMUs (default none)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     """Print the table (and write the recording with ``--save``)."""
     seeds = list(range(args.first_seed, args.first_seed + max(1, args.seeds)))
     runs: dict[str, RunResult] = {}
-    rows = error_table(seeds, first_runs=runs)
-    print(format_table(rows, seeds))
+    rows = error_table(seeds, first_runs=runs, axes=args.axis_errors)
+    print(format_table(rows, seeds, args.axis_errors))
     if args.save is not None:
         save_dual_runs(args.save, {c: view_of(r) for c, r in runs.items()})
         print(f"recording of seed {seeds[0]} written to {args.save} (open it with: rerun {args.save})")

@@ -157,6 +157,7 @@ def simulate_dual_imu(
     speed_mps: float = 1.4,
     initial_still_s: float = 3.0,
     laps: int = 1,
+    axes: str = "none",
 ) -> DualImuRecording:
     """Walk ``laps`` laps of a closed course with a dual-IMU board (errors independent per IMU).
 
@@ -170,6 +171,9 @@ def simulate_dual_imu(
         IMU 2's position in IMU 1's axes, m.
     grade : ImuGrade or str
         Error grade of both IMUs (drawn independently).
+    axes : str
+        Scale-factor and cross-axis errors of both IMUs (a key of ``imu_errors.AXIS_ERRORS``; drawn
+        independently).
     """
     n_lap, lap_s = one_lap_duration_s(path, speed_mps, initial_still_s)
     duration_s = initial_still_s + laps * (lap_s - initial_still_s)
@@ -190,6 +194,8 @@ def simulate_dual_imu(
     gyr = np.empty_like(board.gyr_b_radps)
     errs = []
     for i, s in enumerate((seed1, seed2)):
-        acc[:, i], gyr[:, i], applied = corrupt(board.acc_b_mps2[:, i], board.gyr_b_radps[:, i], rate_hz, grade, s)
+        acc[:, i], gyr[:, i], applied = corrupt(
+            board.acc_b_mps2[:, i], board.gyr_b_radps[:, i], rate_hz, grade, s, axes=axes
+        )
         errs.append(applied)
     return DualImuRecording(board, acc, gyr, (errs[0], errs[1]), path, seed)
