@@ -123,18 +123,12 @@ def filter_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float,
     with the profile's motion noise.
     """
     par = np.zeros(eskf.N_PAR)
-    par[eskf.PAR_SIG_ACC] = math.hypot(
-        profile.acc_noise_mps2_rthz * math.sqrt(rate_hz), profile.motion_acc_mps2
-    )
-    par[eskf.PAR_SIG_GYR] = math.hypot(
-        profile.gyr_noise_radps_rthz * math.sqrt(rate_hz), profile.motion_gyr_radps
-    )
+    par[eskf.PAR_SIG_ACC] = math.hypot(profile.acc_noise_mps2_rthz * math.sqrt(rate_hz), profile.motion_acc_mps2)
+    par[eskf.PAR_SIG_GYR] = math.hypot(profile.gyr_noise_radps_rthz * math.sqrt(rate_hz), profile.motion_gyr_radps)
     par[eskf.PAR_BA_RW] = profile.acc_bias_rw_mps3_rthz
     par[eskf.PAR_BG_RW] = profile.gyr_bias_rw_radps2_rthz
     par[eskf.PAR_ZUPT] = profile.zupt_sigma_mps
-    par[eskf.PAR_ZARU] = math.hypot(
-        profile.zaru_sigma_radps, profile.gyr_noise_radps_rthz * math.sqrt(rate_hz)
-    )
+    par[eskf.PAR_ZARU] = math.hypot(profile.zaru_sigma_radps, profile.gyr_noise_radps_rthz * math.sqrt(rate_hz))
     par[eskf.PAR_G] = gravity_mps2
     par[eskf.PAR_DT_MAX] = dt_max_s
     par[eskf.PAR_ZARU_GATE] = ZARU_GATE_CHI2_3DOF
@@ -267,9 +261,7 @@ class Navigator:
         need = max(2, round(cfg.align_s * self.rate_hz))
         kernel = np.ones(need) / need
         # the centred window's mean |f|, normalised at the ends where the window is cut short
-        mean_f = np.convolve(norm_f, kernel, mode="same") / np.convolve(
-            np.ones_like(norm_f), kernel, mode="same"
-        )
+        mean_f = np.convolve(norm_f, kernel, mode="same") / np.convolve(np.ones_like(norm_f), kernel, mode="same")
         with np.errstate(invalid="ignore"):
             quiet: NDArray[np.bool_] = (rate < cfg.align_max_rate_radps) & (
                 np.abs(norm_f - mean_f) < cfg.align_max_acc_dev_mps2
@@ -351,6 +343,7 @@ class Navigator:
         at = np.searchsorted(batch.t_s, due.t_s, side="right") - 1
         self.tof.counts.add("late", int(np.count_nonzero(at < 0)))
         heights, codes, innov, floors = np.full(m, np.nan), np.zeros(m, np.int64), np.full(m, np.nan), np.zeros(m)
+        hits = np.full((m, 4), np.nan)
         floor_z, floor_c = np.empty(n), np.empty(n)
         a = 0
         for j in range(m + 1):
@@ -379,7 +372,12 @@ class Navigator:
                     x, P, float(due.t_s[j]), int(due.sensor[j]), float(due.range_m[j]), int(due.status[j]), stance
                 )
                 floors[j] = self.tof.floor_z_m
-        return floor_z, floor_c, RangeOutputs(due.t_s, due.sensor, due.status, heights, codes, innov, floors)
+                if self.tof.last_hit is not None:
+                    hits[j] = self.tof.last_hit
+        outputs = RangeOutputs(
+            due.t_s, due.sensor, due.status, heights, codes, innov, floors, hits[:, :3], hits[:, 3] == 1.0
+        )
+        return floor_z, floor_c, outputs
 
 
 def nav_batch(
@@ -462,7 +460,6 @@ def _first_run(mask: NDArray[np.bool_], length: int) -> int:
     return int(hits[0]) if hits.size else -1
 
 
-
 def navigate(
     t_s: F64,
     acc_b_mps2: F64,
@@ -479,7 +476,5 @@ def navigate(
     if ranges is not None:
         nav.add_ranges(ranges)
     n = t_s.shape[0]
-    out = nav.process(
-        ImuBatch(t_s, acc_b_mps2, gyr_b_radps, np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64))
-    )
+    out = nav.process(ImuBatch(t_s, acc_b_mps2, gyr_b_radps, np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64)))
     return out, nav.stats

@@ -78,6 +78,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -228,6 +229,9 @@ class RangeOutputs:
         code: (m,) what was done (:data:`CODE_NAMES`).
         innovation_m: (m,) innovation against the reference floor (NaN when not computed).
         floor_z_m: (m,) the reference floor level in force.
+        hit_point_n_m: (m, 3) where the reading's ray hit a floor (x, y) and that surface's height
+            (a known level, else where the ray hit), m; NaN for readings that gave no floor hit.
+        hit_on_level: (m,) the surface height is a known level.
     """
 
     t_s: F64
@@ -237,6 +241,8 @@ class RangeOutputs:
     code: NDArray[np.int64]
     innovation_m: F64
     floor_z_m: F64
+    hit_point_n_m: F64
+    hit_on_level: NDArray[np.bool_]
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -296,6 +302,8 @@ class TofAiding:
         self._pending: list[RangeBatch] = []
         self.active = False
         """True once any reading arrived (the navigator then splits its batches and tracks the floor)."""
+        self.last_hit: tuple[float, float, float, float] | None = None
+        """The floor hit (x, y, surface height, on a known level) of the last reading applied, or None."""
 
     @property
     def n_sensors(self) -> int:
@@ -340,6 +348,7 @@ class TofAiding:
         """Handle one reading at the current filter time ``t_s``; returns (code, measured height,
         innovation)."""
         cfg = self.config
+        self.last_hit = None
         if not stance and self._in_stance and self._provisional:
             self._finish_level(P)
         if not stance and self._in_stance:
@@ -392,7 +401,8 @@ class TofAiding:
         if code in (tu.USED, tu.STEP_EDGE, FLOOR_PENDING, DISABLED):
             level = self._nearest_level(floor_obs)
             hit_x, hit_y = float(res[tu.RES_HIT_X]), float(res[tu.RES_HIT_Y])
-            self._hits.append((hit_x, hit_y, floor_obs if level is None else level, float(level is not None)))
+            self.last_hit = (hit_x, hit_y, floor_obs if level is None else level, float(level is not None))
+            self._hits.append(self.last_hit)
             if not stance:
                 self._swing_hits.append(self._hits[-1])
         self.counts.add(CODE_NAMES[code])
@@ -434,48 +444,16 @@ class TofAiding:
         return floor, expected
 
     def _floor_from_hits(self, pos_n_m: F64) -> tuple[F64, F64]:
-        n = pos_n_m.shape[0]
         if not self._hits:
-            return np.full(n, self.floor_z_m), np.full(n, self.floor_z_m)
-        hits = np.asarray(self._hits)
-        dz = np.abs(hits[:, None, 2] - hits[None, :, 2]) <= self.config.snap_m
-        confirmed = dz.sum(axis=1) >= 2  # another recent hit agrees (a single reflection is not a floor)
-        if not confirmed.any():
-            return np.full(n, self.floor_z_m), np.full(n, self.floor_z_m)
-        free = hits[:, 3] == 0  # a surface at no known level (a tread seen in swing): its hits' mean
-        if free.any():
-            agree = dz & free[None, :]
-            hits[free, 2] = ((agree * hits[None, :, 2]).sum(axis=1) / np.maximum(agree.sum(axis=1), 1))[free]
-        hits = hits[confirmed]
-        z = hits[:, 2]
-        if z.max() == z.min():  # one floor around (most of the time): nothing to look up
-            return np.full(n, z[0]), np.full(n, z[0])
-        nearest = self._nearest_hit(pos_n_m, hits)
-        if self._swing_origin is None or self._in_stance:
-            return nearest, nearest.copy()
-        # in swing: along the way from the last stance, between the nearest hits behind and ahead
-        ox, oy = self._swing_origin
-        dx, dy = pos_n_m[:, 0] - ox, pos_n_m[:, 1] - oy
-        s_imu = np.hypot(dx, dy)
-        moved = s_imu > SWING_MIN_M
-        inv = np.where(moved, 1.0 / np.maximum(s_imu, 1e-9), 0.0)
-        s_hit = (hits[None, :, 0] - ox) * (dx * inv)[:, None] + (hits[None, :, 1] - oy) * (dy * inv)[:, None]
-        ds = s_hit - s_imu[:, None]
-        behind = np.where(ds <= 0.0, -ds, np.inf)
-        ahead = np.where(ds > 0.0, ds, np.inf)
-        ib, ia = np.argmin(behind, axis=1), np.argmin(ahead, axis=1)
-        rows = np.arange(n)
-        db, da = behind[rows, ib], ahead[rows, ia]
-        between = moved & np.isfinite(db) & np.isfinite(da)
-        w = np.where(between, db / np.maximum(db + da, 1e-9), 0.0)
-        zb, za = hits[ib, 2], hits[ia, 2]
-        if self._edges_arr.shape[0]:
-            for i in np.flatnonzero(between & (np.abs(za - zb) > self.config.snap_m)):
-                lo, hi = self._narrow(
-                    s_imu[i] - db[i], s_imu[i] + da[i], ox, oy, dx[i] * inv[i], dy[i] * inv[i], zb[i], za[i]
-                )
-                w[i] = min(max((s_imu[i] - lo) / max(hi - lo, 1e-9), 0.0), 1.0)
-        return np.where(between, np.where(w < 0.5, zb, za), nearest), np.where(between, zb + w * (za - zb), nearest)
+            return np.full(pos_n_m.shape[0], self.floor_z_m), np.full(pos_n_m.shape[0], self.floor_z_m)
+        return floor_from_hits(
+            pos_n_m,
+            np.asarray(self._hits),
+            self.config.snap_m,
+            self.floor_z_m,
+            None if self._in_stance else self._swing_origin,
+            self._narrow if self._edges_arr.shape[0] else None,
+        )
 
     def _learn_edges(self, end_x: float, end_y: float) -> None:
         """Step edges crossed in the swing that just ended: between consecutive surfaces along the way."""
@@ -529,7 +507,74 @@ class TofAiding:
                 lo, hi = a, b
         return lo, hi
 
-    @staticmethod
-    def _nearest_hit(pos_n_m: F64, hits: F64) -> F64:
-        d2 = (pos_n_m[:, None, 0] - hits[None, :, 0]) ** 2 + (pos_n_m[:, None, 1] - hits[None, :, 1]) ** 2
-        return np.asarray(hits[np.argmin(d2, axis=1), 2], dtype=np.float64)
+
+Narrow = Callable[[float, float, float, float, float, float, float, float], tuple[float, float]]
+"""(lo, hi, ox, oy, ux, uy, zb, za) -> the bracket [lo, hi] of an edge between floors zb and za along
+(ux, uy) from (ox, oy), narrowed (``TofAiding._narrow``)."""
+
+
+def floor_from_hits(
+    pos_n_m: F64,
+    hits: F64,
+    snap_m: float,
+    default_z_m: float,
+    swing_origin: tuple[float, float] | None = None,
+    narrow: Narrow | None = None,
+    min_support: int = 2,
+) -> tuple[F64, F64]:
+    """The floor under IMU positions from floor hit points (module docstring, "Clearance").
+
+    Args:
+        pos_n_m: (n, 3) IMU positions.
+        hits: (k, 4) hit points: x, y, surface height (a known level, or where the ray hit), 1.0 when
+            the height is a known level, else 0.0.
+        snap_m: hits within this height of each other are on the same surface.
+        default_z_m: the floor when no hit is confirmed by another.
+        swing_origin: where the swing began (x, y); None in stance (the nearest hit's floor then).
+        narrow: narrows a step edge's bracket with edges learned before, or None.
+        min_support: a hit counts when this many hits (itself included) lie within ``snap_m`` of its
+            height.
+
+    Returns:
+        (n,) the tread under each position and (n,) the floor height to measure the clearance from
+        (interpolated between the hits on both sides of a step edge).
+    """
+    n = pos_n_m.shape[0]
+    dz = np.abs(hits[:, None, 2] - hits[None, :, 2]) <= snap_m
+    confirmed = dz.sum(axis=1) >= min_support  # others agree (a single reflection is not a floor)
+    if not confirmed.any():
+        return np.full(n, default_z_m), np.full(n, default_z_m)
+    hits = hits.copy()
+    free = hits[:, 3] == 0  # a surface at no known level (a tread seen in swing): its hits' mean
+    if free.any():
+        agree = dz & free[None, :]
+        hits[free, 2] = ((agree * hits[None, :, 2]).sum(axis=1) / np.maximum(agree.sum(axis=1), 1))[free]
+    hits = hits[confirmed]
+    z = hits[:, 2]
+    if z.max() == z.min():  # one floor around (most of the time): nothing to look up
+        return np.full(n, z[0]), np.full(n, z[0])
+    d2 = (pos_n_m[:, None, 0] - hits[None, :, 0]) ** 2 + (pos_n_m[:, None, 1] - hits[None, :, 1]) ** 2
+    nearest = np.asarray(z[np.argmin(d2, axis=1)], dtype=np.float64)
+    if swing_origin is None:
+        return nearest, nearest.copy()
+    # in swing: along the way from the last stance, between the nearest hits behind and ahead
+    ox, oy = swing_origin
+    dx, dy = pos_n_m[:, 0] - ox, pos_n_m[:, 1] - oy
+    s_imu = np.hypot(dx, dy)
+    moved = s_imu > SWING_MIN_M
+    inv = np.where(moved, 1.0 / np.maximum(s_imu, 1e-9), 0.0)
+    s_hit = (hits[None, :, 0] - ox) * (dx * inv)[:, None] + (hits[None, :, 1] - oy) * (dy * inv)[:, None]
+    ds = s_hit - s_imu[:, None]
+    behind = np.where(ds <= 0.0, -ds, np.inf)
+    ahead = np.where(ds > 0.0, ds, np.inf)
+    ib, ia = np.argmin(behind, axis=1), np.argmin(ahead, axis=1)
+    rows = np.arange(n)
+    db, da = behind[rows, ib], ahead[rows, ia]
+    between = moved & np.isfinite(db) & np.isfinite(da)
+    w = np.where(between, db / np.maximum(db + da, 1e-9), 0.0)
+    zb, za = z[ib], z[ia]
+    if narrow is not None:
+        for i in np.flatnonzero(between & (np.abs(za - zb) > snap_m)):
+            lo, hi = narrow(s_imu[i] - db[i], s_imu[i] + da[i], ox, oy, dx[i] * inv[i], dy[i] * inv[i], zb[i], za[i])
+            w[i] = min(max((s_imu[i] - lo) / max(hi - lo, 1e-9), 0.0), 1.0)
+    return np.where(between, np.where(w < 0.5, zb, za), nearest), np.where(between, zb + w * (za - zb), nearest)

@@ -13,7 +13,8 @@ navigator: with the ToF channel, and with it removed (zero-velocity updates alon
 measured side by side. Figures against the emulator's ground truth:
 
 - clearance RMS: estimated clearance (``NavBatch.clearance_m``) minus the true height of the IMU above
-  the floor under it, over every navigated sample;
+  the floor under it, over every navigated sample; live, and from each swing's hits past and future
+  (:mod:`pipeline.swing_clearance`, what replay and evaluation can do);
 - vertical error at footfalls (the accumulated error): RMS and maximum of the z error over the true
   stance samples, and the z error at the end;
 - horizontal error: RMS over stance samples and at the end;
@@ -23,6 +24,7 @@ measured side by side. Figures against the emulator's ground truth:
 from __future__ import annotations
 
 import argparse
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +36,7 @@ from device.emulator.tof_sensors import TofSensorModel, tof_readings
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavConfig, navigate
 from pipeline.profiles import get_profile
+from pipeline.swing_clearance import swing_clearance
 from pipeline.tof_aiding import CODE_NAMES, STATUS_NAMES, RangeBatch, TofConfig
 
 NAME = "tof"
@@ -61,6 +64,8 @@ class RunFigures:
     """Errors of one navigation of a recording (see the module docstring), metres."""
 
     clearance_rms_m: float
+    swing_clearance_rms_m: float
+    """From each swing's hits past and future (NaN without ToF)."""
     z_stance_rms_m: float
     z_stance_max_m: float
     z_final_m: float
@@ -83,16 +88,24 @@ def record(
     return Recording(truth, acc, gyr, RangeBatch(script.t_s, script.sensor, script.range_m, script.status))
 
 
-def figures(truth: GaitTruth, nav: NavBatch, readings: dict[str, int]) -> RunFigures:
-    """Errors of the estimates ``nav`` (the last ``len(nav)`` samples of the recording)."""
+def figures(truth: GaitTruth, nav: NavBatch, readings: dict[str, int], snap_m: float | None = None) -> RunFigures:
+    """Errors of the estimates ``nav`` (the last ``len(nav)`` samples of the recording); ``snap_m``:
+    ``TofConfig.snap_m`` of the run (default: the default's)."""
     first = len(truth) - len(nav)
     pos_true = truth.pos_n_m[first:]
     err = nav.pos_n_m - pos_true
     still = truth.stance[first:]
-    clearance_err = nav.clearance_m - (pos_true[:, 2] - truth.floor_z_m[first:])
+    clearance_true = pos_true[:, 2] - truth.floor_z_m[first:]
+    clearance_err = nav.clearance_m - clearance_true
+    swing_rms = math.nan
+    if nav.ranges is not None:
+        snap = TofConfig().snap_m if snap_m is None else snap_m
+        swing = swing_clearance(nav.t_s, nav.pos_n_m, nav.stance, nav.clearance_m, nav.ranges, snap)
+        swing_rms = float(np.sqrt(np.mean((swing - clearance_true) ** 2)))
     xy = np.hypot(err[:, 0], err[:, 1])
     return RunFigures(
         clearance_rms_m=float(np.sqrt(np.mean(clearance_err**2))),
+        swing_clearance_rms_m=swing_rms,
         z_stance_rms_m=float(np.sqrt(np.mean(err[still, 2] ** 2))),
         z_stance_max_m=float(np.max(np.abs(err[still, 2]))),
         z_final_m=float(abs(err[-1, 2])),
@@ -112,7 +125,7 @@ def compare(rec: Recording, tof: TofConfig | None = None) -> tuple[RunFigures, R
         if nav is None:
             raise RuntimeError("the navigator never aligned on the emulated walk")
         counts = {} if nav.ranges is None else _counts(nav)
-        out.append(figures(t, nav, counts))
+        out.append(figures(t, nav, counts, (tof or TofConfig()).snap_m))
     return out[0], out[1]
 
 
@@ -130,21 +143,26 @@ def _counts(nav: NavBatch) -> dict[str, int]:
 def table(rows: list[tuple[str, RunFigures, RunFigures]]) -> list[str]:
     """The experiment's table, one line per walk and run, in cm."""
     head = (
-        f"{'walk':<16}{'run':<10}{'clearance':>10}{'z stance':>10}{'z max':>8}{'z end':>8}"
+        f"{'walk':<16}{'run':<10}{'clearance':>10}{'swing':>8}{'z stance':>10}{'z max':>8}{'z end':>8}"
         f"{'xy stance':>11}{'xy end':>8}   readings"
     )
-    lines = [head, f"{'':<26}{'RMS cm':>10}{'RMS cm':>10}{'cm':>8}{'cm':>8}{'RMS cm':>11}{'cm':>8}"]
+    lines = [head, f"{'':<26}{'RMS cm':>10}{'RMS cm':>8}{'RMS cm':>10}{'cm':>8}{'cm':>8}{'RMS cm':>11}{'cm':>8}"]
     for walk, zupt, tof in rows:
         for label, f in (("ZUPT", zupt), ("ZUPT+ToF", tof)):
             counts = ", ".join(f"{k} {v}" for k, v in sorted(f.readings.items(), key=lambda kv: -kv[1]))
             lines.append(
-                f"{walk:<16}{label:<10}{100 * f.clearance_rms_m:>10.2f}{100 * f.z_stance_rms_m:>10.2f}"
+                f"{walk:<16}{label:<10}{100 * f.clearance_rms_m:>10.2f}{_cm(f.swing_clearance_rms_m):>8}"
+                f"{100 * f.z_stance_rms_m:>10.2f}"
                 f"{100 * f.z_stance_max_m:>8.2f}{100 * f.z_final_m:>8.2f}{100 * f.xy_stance_rms_m:>11.2f}"
                 f"{100 * f.xy_final_m:>8.2f}   {counts or '-'}"
             )
         ratio = zupt.z_stance_rms_m / max(tof.z_stance_rms_m, 1e-12)
         lines.append(f"{'':<16}vertical error at footfalls {ratio:.1f}x lower with ToF")
     return lines
+
+
+def _cm(v_m: float) -> str:
+    return "-" if math.isnan(v_m) else f"{100 * v_m:.2f}"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
