@@ -15,6 +15,8 @@ from device.emulator.scripts import baro_from_height
 from pipeline.baro import PressureBatch
 from pipeline.navigator import NavConfig, Navigator
 from pipeline.samples import ImuBatch
+from pipeline.swing_clearance import swing_clearance
+from pipeline.tof_aiding import TofConfig
 from views import convert
 from views.logger import RerunLogger
 from views.paths import TIMELINE, FootPaths
@@ -58,6 +60,12 @@ def test_tof_entities_round_trip_through_an_rrd(tmp_path: Path) -> None:
         t_k, h_k = _values(store, p.tof_height(k))
         np.testing.assert_allclose(t_k, r.t_s[sel], atol=1e-6)
         np.testing.assert_allclose(h_k[:, 0], r.height_m[sel], atol=1e-9)
+    # the clearance from each swing's hits past and future, every sample once, as over the whole walk
+    t_sw, c_sw = _values(store, p.swing_clearance)
+    np.testing.assert_allclose(t_sw, whole.t_s, atol=1e-6)
+    expected = swing_clearance(whole.t_s, whole.pos_n_m, whole.stance, whole.clearance_m, r, TofConfig().snap_m)
+    np.testing.assert_allclose(c_sw[:, 0], expected, atol=1e-9)
+    assert np.any(np.abs(expected - whole.clearance_m) > 0.01)  # it differs from the live one at step edges
     t_st, mm = _values(store, p.stride_clearance)
     np.testing.assert_allclose(t_st, strides.t_s, atol=1e-6)
     assert len(strides) >= 15

@@ -198,6 +198,10 @@ def static_setup(feet: Sequence[str] = ("foot",)) -> list[tuple[str, rr.AsCompon
                 ),
             ),
             (p.clearance, rr.SeriesLines(names=f"{foot} clearance", colors=[rgb], widths=1.5)),
+            (
+                p.swing_clearance,
+                rr.SeriesLines(names=f"{foot} clearance (whole swing)", colors=[(*_darker(rgb),)], widths=1.0),
+            ),
             (p.stance, rr.SeriesLines(names=f"{foot} stance", colors=[rgb], widths=1.5)),
             *(
                 (p.tof_height(k), rr.SeriesPoints(names=f"{foot} ToF {k} height", colors=[c], marker_sizes=1.5))

@@ -357,6 +357,13 @@ def tof_columns(nav: NavBatch, paths: FootPaths, totals: NDArray[np.int64]) -> l
     return out
 
 
+def series_columns(path: str, t_s: F64, values: F64) -> list[SendColumns]:
+    """One scalar series ``values`` (n,) at ``t_s`` (n,) on ``path`` (empty when n = 0)."""
+    if not len(t_s):
+        return []
+    return [(path, time_column(t_s), rr.Scalars.columns(scalars=np.asarray(values, dtype=np.float64)))]
+
+
 def gait_columns(t_s: F64, stance: NDArray[np.bool_], paths: FootPaths, *, previous: bool | None) -> SendColumns | None:
     """StateChange column for the stance/swing lane, only at transitions (None when there are none)."""
     idx = stance_transitions(stance, previous)

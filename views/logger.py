@@ -29,6 +29,8 @@ from numpy.typing import NDArray
 from rerun.sinks import LogSinkLike
 
 from pipeline.nav_types import NavBatch
+from pipeline.swing_clearance import SwingClearanceTracker
+from pipeline.tof_aiding import TofConfig
 from views import convert
 from views.blueprint import build_blueprint, floor_patch, static_setup
 from views.dual_imu import DualRunView, dual_columns, static_styles
@@ -217,6 +219,8 @@ class RerunLogger:
         self._steps: dict[str, int] = dict.fromkeys(self.feet, 0)
         self._tof_totals: dict[str, np.ndarray] = {}
         """Per foot: ToF readings since the start [used, gated, invalid status] (``convert.tof_columns``)."""
+        self._swing: dict[str, SwingClearanceTracker] = {}
+        """Per ToF foot: the clearance from each swing's hits past and future, once the swing is over."""
         self._thread = threading.Thread(target=self._run, name="footnav-rerun", daemon=True)
         self._thread.start()
 
@@ -264,9 +268,7 @@ class RerunLogger:
             if not self._closed:
                 self._queue.put(_Dual(run, view))
 
-    def log_truth(
-        self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT
-    ) -> None:
+    def log_truth(self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT) -> None:
         """Log a ground-truth track: positions (n, 3), m, at device times (n,), s. Never blocks."""
         if foot not in self._paths:
             raise ValueError(f"foot {foot!r} was not declared; this logger has feet={self.feet}")
@@ -369,6 +371,7 @@ class RerunLogger:
             if stop:
                 break
         self._guarded(self._send_lines, True)
+        self._guarded(self._send_swing_rest)
         self._guarded(self._finish)
 
     def _discard_until_stop(self) -> None:
@@ -433,10 +436,12 @@ class RerunLogger:
             arrays, paths, ellipsoid_every=self._ellipsoid_every, first_index=first, series_every=self._series_every
         )
         onsets = convert.step_onsets(nav.stance, self._last_stance[foot])
-        columns_list += convert.step_columns(
-            arrays, nav.pos_cov_n_m2, onsets, paths, sigma_scale=self._sigma_scale
-        )
+        columns_list += convert.step_columns(arrays, nav.pos_cov_n_m2, onsets, paths, sigma_scale=self._sigma_scale)
         columns_list += convert.tof_columns(nav, paths, self._tof_totals.setdefault(foot, np.zeros(3, np.int64)))
+        if nav.floor_z_m is not None or foot in self._swing:  # a ToF unit: its floor is tracked
+            tracker = self._swing.setdefault(foot, SwingClearanceTracker(TofConfig().snap_m))
+            done = tracker.update(nav.t_s, nav.pos_n_m, nav.stance, nav.clearance_m, nav.ranges)
+            columns_list += convert.series_columns(paths.swing_clearance, *done)
         for path, index, columns in columns_list:
             rec.send_columns(path, indexes=[index], columns=columns)
         self._steps[foot] += int(onsets.size)
@@ -469,9 +474,7 @@ class RerunLogger:
                 paths.rate, indexes=[index], columns=rr.Scalars.columns(scalars=[i.rate_hz for i in items])
             )
             errors = np.array([[i.lost_packets, i.reconnects] for i in items], dtype=np.float64)
-            self.recording.send_columns(
-                paths.link_errors, indexes=[index], columns=rr.Scalars.columns(scalars=errors)
-            )
+            self.recording.send_columns(paths.link_errors, indexes=[index], columns=rr.Scalars.columns(scalars=errors))
 
     def _send_lines(self, final: bool) -> None:
         """Re-log each foot's decimated track line if it grew and ≥ LINE_PERIOD_S passed (device and wall)."""
@@ -504,6 +507,11 @@ class RerunLogger:
             indexes=[convert.time_column(truth.t_s)],
             columns=rr.Points3D.columns(positions=truth.pos_n_m.astype(np.float32)),
         )
+
+    def _send_swing_rest(self) -> None:
+        for foot, tracker in self._swing.items():
+            for path, index, columns in convert.series_columns(self._paths[foot].swing_clearance, *tracker.finish()):
+                self.recording.send_columns(path, indexes=[index], columns=columns)
 
     def _finish(self) -> None:
         self.recording.flush(timeout_sec=CLOSE_TIMEOUT_S)

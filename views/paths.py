@@ -17,7 +17,8 @@ so two feet become siblings under ``world/`` and in each plot:
   (stance, clearance, pos_sigma, detector, speed, heading; link health: rate, link_errors;
   ToF units: tof_readings, altitude);
 - ``plots/clearance/<foot>/tof<k>``  each ToF sensor's measured height of the IMU, per reading, and
-  ``plots/clearance/<foot>/stride``  per-stride ``[mid-swing minimum, maximum]`` clearance, in the
+  ``plots/clearance/<foot>/stride``  per-stride ``[mid-swing minimum, maximum]`` clearance, and
+  ``plots/clearance/<foot>/swing`` the clearance from each swing's hits past and future, in the
   clearance view;
 - ``gait/<foot>``  StateChange lane (stance/swing transitions only).
 """
@@ -148,6 +149,12 @@ class FootPaths:
         """ToF sensor ``sensor``'s measured height of the IMU above the surface it hit, m (one point per
         valid reading), in the clearance view."""
         return f"{self.clearance}/tof{sensor}"
+
+    @property
+    def swing_clearance(self) -> str:
+        """Foot clearance from each swing's floor hits past and future (``pipeline.swing_clearance``),
+        m, logged each swing about 0.25 s after it ends, in the clearance view."""
+        return f"{self.clearance}/swing"
 
     @property
     def stride_clearance(self) -> str:
