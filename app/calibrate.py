@@ -322,7 +322,9 @@ def _demo_server(opts: CalibrateOptions) -> tuple[PtyShoeServer, Miscalibration]
     acc, gyr = miscalibrated_signals(
         truth.acc_b_mps2, truth.gyr_b_radps, temp, BASE_RATE_HZ, errors=errors, seed=opts.demo_seed
     )
-    server = PtyShoeServer(truth.t_s, acc, gyr, speed=opts.demo_pace, record=False, temp_c=temp, mcu_id=DEMO_MCU_ID)
+    server = PtyShoeServer(
+        truth.t_s, acc, gyr, speed=opts.demo_pace, record=False, temp_c=temp, mcu_id=DEMO_MCU_ID
+    )
     return server, errors
 
 
@@ -337,3 +339,5 @@ def run_calibrate(opts: CalibrateOptions) -> int:
         print("interrupted: no calibration saved", file=sys.stderr)
         return 130
     return 0
+
+

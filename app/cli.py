@@ -78,12 +78,16 @@ def build_parser() -> argparse.ArgumentParser:
     from app.demo import PATHS
     from device.emulator.imu_errors import AXIS_ERRORS, IMU_GRADES
 
-    parser = argparse.ArgumentParser(prog="footnav", description="Foot-mounted inertial navigation, live in Rerun.")
+    parser = argparse.ArgumentParser(
+        prog="footnav", description="Foot-mounted inertial navigation, live in Rerun."
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug detail to stderr")
     sub = parser.add_subparsers(dest="command", required=True)
 
     demo = sub.add_parser("demo", help="run everything against the built-in emulated shoe (no hardware)")
-    demo.add_argument("--path", choices=PATHS, default="rectangle", help="walking path (default: rectangle, 18 × 9 m)")
+    demo.add_argument(
+        "--path", choices=PATHS, default="rectangle", help="walking path (default: rectangle, 18 × 9 m)"
+    )
     demo.add_argument(
         "--duration", type=_positive, default=60.0, metavar="S", help="walk duration in seconds (default 60)"
     )
@@ -107,8 +111,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_output_args(demo, capture=True)
     _add_config_args(demo)
     _add_stance_arg(demo, default="inertial")
-    demo.add_argument("--feet", type=int, choices=(1, 2), default=1, help="emulated shoes: 1, or 2 (left and right)")
-    demo.add_argument("--pace", type=_pace, default=1.0, metavar="1x|Nx|max", help="emulator speed (default real time)")
+    demo.add_argument(
+        "--feet", type=int, choices=(1, 2), default=1, help="emulated shoes: 1, or 2 (left and right)"
+    )
+    demo.add_argument(
+        "--pace", type=_pace, default=1.0, metavar="1x|Nx|max", help="emulator speed (default real time)"
+    )
     demo.add_argument("--seed", type=int, default=1, help="random seed of the emulated sensor errors")
     demo.add_argument(
         "--miscalibrated",
@@ -144,7 +152,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="emulate the multi-sensor unit: three ToF range sensors and a barometer, fused for foot clearance",
     )
 
-    live = sub.add_parser("live", help="navigate one connected unit, or two (--left/--right), over USB serial or BLE")
+    live = sub.add_parser(
+        "live", help="navigate one connected unit, or two (--left/--right), over USB serial or BLE"
+    )
     live.add_argument("--port", help="serial port of the unit, e.g. /dev/ttyACM0 (or ble:NAME)")
     live.add_argument(
         "--ble",
@@ -226,13 +236,21 @@ def build_parser() -> argparse.ArgumentParser:
     _add_config_args(cal, profile=False)
 
     scan = sub.add_parser("scan", help="list serial ports and BLE devices that look like shoe units")
-    scan.add_argument("--timeout", type=_positive, default=5.0, metavar="S", help="how long to scan BLE (default 5 s)")
+    scan.add_argument(
+        "--timeout", type=_positive, default=5.0, metavar="S", help="how long to scan BLE (default 5 s)"
+    )
 
     replay = sub.add_parser("replay", help="replay a footnav capture (.mcap) through the same pipeline")
     replay.add_argument("file", type=Path, metavar="FILE", help="a capture written by footnav live/demo")
-    replay.add_argument("--speed", type=_pace, default=math.inf, metavar="1x|Nx|max", help="replay pace (default max)")
-    replay.add_argument("--start", type=_seconds, default=0.0, metavar="S", help="start S seconds into the capture")
-    replay.add_argument("--end", type=_seconds, default=math.inf, metavar="S", help="stop S seconds into the capture")
+    replay.add_argument(
+        "--speed", type=_pace, default=math.inf, metavar="1x|Nx|max", help="replay pace (default max)"
+    )
+    replay.add_argument(
+        "--start", type=_seconds, default=0.0, metavar="S", help="start S seconds into the capture"
+    )
+    replay.add_argument(
+        "--end", type=_seconds, default=math.inf, metavar="S", help="stop S seconds into the capture"
+    )
     replay.add_argument(
         "--without-tof",
         action="store_true",
@@ -243,12 +261,18 @@ def build_parser() -> argparse.ArgumentParser:
     _add_output_args(replay, capture=False)
 
     export = sub.add_parser("export", help="navigate a recording and write one CSV row per sample")
-    export.add_argument("input", type=Path, metavar="INPUT", help="a PyShoe .mat, x-io CSV, OpenShoe log or CSV")
-    export.add_argument("-o", "--output", type=Path, required=True, metavar="TRACK.csv", help="where to write")
+    export.add_argument(
+        "input", type=Path, metavar="INPUT", help="a PyShoe .mat, x-io CSV, OpenShoe log or CSV"
+    )
+    export.add_argument(
+        "-o", "--output", type=Path, required=True, metavar="TRACK.csv", help="where to write"
+    )
     _add_recording_args(export)
 
     evaluate = sub.add_parser("evaluate", help="accuracy on recordings with ground truth or a closed loop")
-    evaluate.add_argument("paths", type=Path, nargs="+", metavar="PATH", help="recordings, or folders of them")
+    evaluate.add_argument(
+        "paths", type=Path, nargs="+", metavar="PATH", help="recordings, or folders of them"
+    )
     evaluate.add_argument("--smooth", action="store_true", help="evaluate the smoothed (non-causal) solution")
 
     from app.experiments import add_experiment_parsers
@@ -267,14 +291,20 @@ def _add_recording_args(parser: argparse.ArgumentParser) -> None:
     from pipeline.loaders import LOADERS
     from pipeline.profiles import PROFILES
 
-    parser.add_argument("--format", choices=sorted(LOADERS), help="recording format (default: detected from the file)")
+    parser.add_argument(
+        "--format", choices=sorted(LOADERS), help="recording format (default: detected from the file)"
+    )
     parser.add_argument(
         "--columns",
         metavar="SPEC",
         help="for a generic CSV: time=COL[:s|ms|us|ns],acc=X;Y;Z[:m/s2|g|mg],gyr=X;Y;Z[:rad/s|deg/s],profile=NAME",
     )
-    parser.add_argument("--profile", choices=sorted(PROFILES), help="unit profile (default: the format's sensor)")
-    parser.add_argument("--smooth", action="store_true", help="smoothed (non-causal) solution instead of the live one")
+    parser.add_argument(
+        "--profile", choices=sorted(PROFILES), help="unit profile (default: the format's sensor)"
+    )
+    parser.add_argument(
+        "--smooth", action="store_true", help="smoothed (non-causal) solution instead of the live one"
+    )
 
 
 def _export(args: argparse.Namespace) -> int:
@@ -463,7 +493,9 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``footnav`` console script."""
     argv = sys.argv[1:] if argv is None else argv
     args = build_parser().parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="footnav: %(message)s")
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.WARNING, format="footnav: %(message)s"
+    )
     if not args.verbose:  # sessions report link events themselves (terminal, recording, capture)
         logging.getLogger("device.links").setLevel(logging.ERROR)
     commands: dict[str, Callable[[argparse.Namespace], int]] = {

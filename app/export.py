@@ -33,7 +33,9 @@ EXPORT_COLUMNS = (
 )
 
 
-def navigate_recording(rec: Recording, profile: str | None = None, smooth: bool = False) -> tuple[NavBatch, NavStats]:
+def navigate_recording(
+    rec: Recording, profile: str | None = None, smooth: bool = False
+) -> tuple[NavBatch, NavStats]:
     """Run the navigator (and the smoother when asked) over a whole recording.
 
     The gyroscope's saturated stretches are reconstructed first (``pipeline.saturation``: this needs
@@ -61,7 +63,9 @@ def navigate_recording(rec: Recording, profile: str | None = None, smooth: bool 
 def write_track_csv(nav: NavBatch, path: Path) -> None:
     """Write ``EXPORT_COLUMNS``: SI units, navigation frame right-handed z up, origin at the start."""
     var = np.diagonal(nav.pos_cov_n_m2, axis1=1, axis2=2)
-    table = np.column_stack([nav.t_s, nav.pos_n_m, nav.vel_n_mps, nav.quat_nb_wxyz, nav.stance.astype(np.float64), var])
+    table = np.column_stack(
+        [nav.t_s, nav.pos_n_m, nav.vel_n_mps, nav.quat_nb_wxyz, nav.stance.astype(np.float64), var]
+    )
     try:
         with path.open("w", newline="") as f:
             writer = csv.writer(f)
@@ -85,4 +89,6 @@ def run_export(
         if stats.samples_before_alignment
         else ""
     )
-    return f"wrote {len(nav)} rows to {out} ({rec.format} recording, profile {profile or rec.profile}{skipped})"
+    return (
+        f"wrote {len(nav)} rows to {out} ({rec.format} recording, profile {profile or rec.profile}{skipped})"
+    )

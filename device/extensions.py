@@ -57,7 +57,9 @@ TOF_NO_TARGET: Final = 2
 TOF_WEAK_SIGNAL: Final = 3
 TOF_SENSOR_ERROR: Final = 4
 
-TOF_DTYPE: Final = np.dtype([("type", "u1"), ("ts", ">u4"), ("sensor", "u1"), ("range", ">u2"), ("status", "u1")])
+TOF_DTYPE: Final = np.dtype(
+    [("type", "u1"), ("ts", ">u4"), ("sensor", "u1"), ("range", ">u2"), ("status", "u1")]
+)
 BARO_DTYPE: Final = np.dtype([("type", "u1"), ("ts", ">u4"), ("pressure", ">u4"), ("temp", ">i2")])
 
 EXTENSION_LENGTHS: Final = {STATE_TOF: TOF_PAYLOAD_LEN, STATE_BARO: BARO_PAYLOAD_LEN}
@@ -127,7 +129,9 @@ class BaroBatch:
         return int(self.t_s.shape[0])
 
 
-def _records(payloads: bytes | bytearray | memoryview, dtype: np.dtype[np.void], state: int) -> NDArray[np.void]:
+def _records(
+    payloads: bytes | bytearray | memoryview, dtype: np.dtype[np.void], state: int
+) -> NDArray[np.void]:
     if len(payloads) % dtype.itemsize:
         raise ValueError(f"state 0x{state:02X} payloads are {dtype.itemsize} bytes each; got {len(payloads)}")
     rec = np.frombuffer(payloads, dtype=dtype)

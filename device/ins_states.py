@@ -78,7 +78,9 @@ class InsLayout:
     def __post_init__(self) -> None:
         unknown = [f"0x{s:02X}" for s in self.state_ids if s not in _FIELDS]
         if unknown or not self.state_ids:
-            raise ValueError(f"INS payloads hold states {[f'0x{s:02X}' for s in INS_STATE_IDS]}; got {unknown}")
+            raise ValueError(
+                f"INS payloads hold states {[f'0x{s:02X}' for s in INS_STATE_IDS]}; got {unknown}"
+            )
         object.__setattr__(self, "state_ids", tuple(sorted(set(self.state_ids))))
 
     @property
@@ -177,7 +179,9 @@ def decode_payloads(payloads: bytes | bytearray | memoryview, layout: InsLayout)
     """
     size = layout.payload_len
     if len(payloads) % size:
-        raise ValueError(f"INS payloads of states {layout.state_ids} are {size} bytes each; got {len(payloads)}")
+        raise ValueError(
+            f"INS payloads of states {layout.state_ids} are {size} bytes each; got {len(payloads)}"
+        )
     rec = np.frombuffer(payloads, dtype=layout.dtype)
     names = rec.dtype.names or ()
     return InsArrays(
@@ -207,7 +211,9 @@ def encode_payloads(
     Raises:
         ValueError: no array given to take n from.
     """
-    given = [a for a in (ticks, interrupt_counter, pos_n_m, vel_n_mps, quat_nb_wxyz, cov_9x9) if a is not None]
+    given = [
+        a for a in (ticks, interrupt_counter, pos_n_m, vel_n_mps, quat_nb_wxyz, cov_9x9) if a is not None
+    ]
     if not given:
         raise ValueError("encode_payloads needs at least one state array")
     n = len(given[0])

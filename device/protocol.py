@@ -187,7 +187,9 @@ def stepwise_dead_reckoning_command() -> bytes:
     return command_frame(CMD_STEPWISE_DEAD_RECKONING)
 
 
-def imu_mode_byte(rate_divider_log2: int | None, *, lossless: bool = False, pull: bool = False, flags: int = 0) -> int:
+def imu_mode_byte(
+    rate_divider_log2: int | None, *, lossless: bool = False, pull: bool = False, flags: int = 0
+) -> int:
     """Return the mode byte for output every ``2**rate_divider_log2`` samples (None: output off).
 
     Bits 0–2 carry d = rate_divider_log2 + 1 (d = 0 means off); bit 4 (0x10) selects lossless mode,
@@ -288,7 +290,12 @@ class CommandParser:
     def feed(self, data: bytes, now_s: float | None = None) -> list[Command]:
         """Add received bytes; return the commands completed by them, in order."""
         buf = self._buf
-        if buf and now_s is not None and self._started_s is not None and now_s - self._started_s > COMMAND_RX_TIMEOUT_S:
+        if (
+            buf
+            and now_s is not None
+            and self._started_s is not None
+            and now_s - self._started_s > COMMAND_RX_TIMEOUT_S
+        ):
             self.bytes_dropped += len(buf)
             buf.clear()
         if not buf:

@@ -159,7 +159,9 @@ def decode_payloads(payloads: bytes | bytearray | memoryview, layout: RawImuLayo
     """
     size = layout.payload_len
     if len(payloads) % size:
-        raise ValueError(f"raw-IMU payloads of {layout.n_imus} IMU(s) are {size} bytes each; got {len(payloads)}")
+        raise ValueError(
+            f"raw-IMU payloads of {layout.n_imus} IMU(s) are {size} bytes each; got {len(payloads)}"
+        )
     rec = np.frombuffer(payloads, dtype=layout.dtype)
     regs = rec["imu"].astype(np.float64)
     return RawImuArrays(

@@ -158,7 +158,9 @@ class StepwiseTracker:
     """Packets whose number was already applied (resends)."""
     _last: int | None = None
 
-    def update(self, numbers: NDArray[np.integer] | list[int], payloads: bytes, host_ns: int = 0) -> StepBatch | None:
+    def update(
+        self, numbers: NDArray[np.integer] | list[int], payloads: bytes, host_ns: int = 0
+    ) -> StepBatch | None:
         """Apply the new packets among ``numbers`` (n,) / ``payloads`` (n × 58 bytes), in order.
 
         Returns:

@@ -284,7 +284,9 @@ class OpenShoeUnit:
             else:
                 old = p.Commands2014()
                 # Only now, with 2015 firmware ruled out, may a 2014 command that 2015 would misparse go out.
-                fallback = old.stepwise_dead_reckoning() if isinstance(mode, StepwiseMode) else old.processing_off()
+                fallback = (
+                    old.stepwise_dead_reckoning() if isinstance(mode, StepwiseMode) else old.processing_off()
+                )
                 if not await self._probe(fallback, probe_s, ruled_out=p.CommandSet.V2015):
                     raise DeviceError(
                         f"no answer from {self.link.name} to the start command within {probe_s:.1f} s "
@@ -493,7 +495,9 @@ class OpenShoeUnit:
         if isinstance(mode, StepwiseMode):
             cmd = c.stepwise_dead_reckoning()
         elif isinstance(mode, NormalImuMode):
-            cmd = c.normal_imu(mode.rate_divider_log2, bias_estimation=mode.bias_estimation, lossless=mode.lossless)
+            cmd = c.normal_imu(
+                mode.rate_divider_log2, bias_estimation=mode.bias_estimation, lossless=mode.lossless
+            )
         elif isinstance(mode, InsMode):
             cmd = c.reset_ins()
         else:
@@ -505,7 +509,11 @@ class OpenShoeUnit:
         if isinstance(mode, StepwiseMode):
             return [c.stepwise_dead_reckoning()]
         if isinstance(mode, NormalImuMode):
-            return [c.normal_imu(mode.rate_divider_log2, bias_estimation=mode.bias_estimation, lossless=mode.lossless)]
+            return [
+                c.normal_imu(
+                    mode.rate_divider_log2, bias_estimation=mode.bias_estimation, lossless=mode.lossless
+                )
+            ]
         if isinstance(mode, RawImuMode):
             return [
                 c.run_proc(p.PROC_READ_INERTIAL, 0),
@@ -522,7 +530,9 @@ class OpenShoeUnit:
         output = c.output_state(ids[0], rate) if len(ids) == 1 else c.output_states(ids, rate)
         return [c.reset_ins(), output]
 
-    async def _probe(self, cmd: p.OutgoingCommand, timeout_s: float, *, ruled_out: p.CommandSet | None = None) -> bool:
+    async def _probe(
+        self, cmd: p.OutgoingCommand, timeout_s: float, *, ruled_out: p.CommandSet | None = None
+    ) -> bool:
         """Send a probe command; on its ACK, adopt its set.
 
         The command must be one the other set's firmware drops unparsed, unless that other set was
@@ -646,7 +656,11 @@ class OpenShoeUnit:
             out.steps.append((number, payload))
         elif isinstance(mode, NormalImuMode) and n == PAYLOAD_LEN:
             out.normal.append((counter, payload))
-        elif isinstance(mode, RawImuMode) and self._raw_layout is not None and n == self._raw_layout.payload_len:
+        elif (
+            isinstance(mode, RawImuMode)
+            and self._raw_layout is not None
+            and n == self._raw_layout.payload_len
+        ):
             out.raw.append((counter, payload))
         elif isinstance(mode, InsMode) and self._ins_layout is not None and n == self._ins_layout.payload_len:
             out.ins.append((counter, payload))
@@ -727,7 +741,9 @@ class OpenShoeUnit:
                 )
             )
         if d.steps:
-            step_batch = self.steps.update([n for n, _ in d.steps], b"".join(pl for _, pl in d.steps), d.host_ns)
+            step_batch = self.steps.update(
+                [n for n, _ in d.steps], b"".join(pl for _, pl in d.steps), d.host_ns
+            )
             if step_batch is not None:
                 out.append(step_batch)
         # Extension readings first: a host that navigates the IMU batch of this read then already
@@ -736,7 +752,9 @@ class OpenShoeUnit:
         ext: list[Batch] = []
         if d.tof and t_tof is not None:
             tarr = extensions.decode_tof(b"".join(pl for _, pl in d.tof))
-            ext.append(TofBatch(t_tof, tarr.sensor, tarr.range_m, tarr.status, counter_of(d.tof), host(len(d.tof))))
+            ext.append(
+                TofBatch(t_tof, tarr.sensor, tarr.range_m, tarr.status, counter_of(d.tof), host(len(d.tof)))
+            )
         if d.baro and t_baro is not None:
             barr = extensions.decode_baro(b"".join(pl for _, pl in d.baro))
             m = len(d.baro)

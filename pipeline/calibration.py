@@ -313,7 +313,9 @@ class ImuCalibration:
             and np.all(3 * self.gyr_bias_sigma_radps <= TOLERANCE["gyr_bias_radps"])
         )
 
-    def correct_arrays(self, acc_b_mps2: F64, gyr_b_radps: F64, temp_c: F64 | None = None) -> tuple[F64, F64]:
+    def correct_arrays(
+        self, acc_b_mps2: F64, gyr_b_radps: F64, temp_c: F64 | None = None
+    ) -> tuple[F64, F64]:
         """Corrected (n, 3) specific force and angular rate; ``temp_c`` (n,) or None (model at ``t_ref_c``)."""
         acc = np.asarray(acc_b_mps2, dtype=np.float64)
         n = acc.shape[0]
@@ -337,7 +339,6 @@ class ImuCalibration:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able parameters with their 1σ and units (for the calibration file)."""
-
         def vec(a: F64) -> list[float]:
             return [float(x) for x in a]
 

@@ -196,7 +196,9 @@ class FaceCollector:
             return [ProcedureEvent("rejected", t_end, str(exc))]
         seen = matching_face(face.direction, [f.direction for f in self.faces])
         if seen is not None:
-            return [ProcedureEvent("seen", t_end, f"face {seen + 1} was captured already: turn the unit to a new face")]
+            return [
+                ProcedureEvent("seen", t_end, f"face {seen + 1} was captured already: turn the unit to a new face")
+            ]
         self.faces.append(face)
         norm = float(np.linalg.norm(face.acc_mean_mps2))
         temp_txt = f", {float(np.nanmean(face.temp_win_c)):.1f} °C" if self._has_temp else ""

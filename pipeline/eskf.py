@@ -118,6 +118,7 @@ def sample_intervals(t_s: F64, t_prev_s: float, dt_max_s: float) -> F64:
     return np.minimum(np.diff(t_s, prepend=t_prev_s), dt_max_s)
 
 
+
 @njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _propagate_cov(P: F64, M: F64, R: F64, f_n: F64, dt: float, q_diag: F64) -> None:
     """P ← F P Fᵀ + Q in place, F = I + A dt with the blocks of the module docstring.

@@ -72,7 +72,9 @@ def load_pyshoe_mat(path: Path) -> Recording:
     mat = _loadmat_isolated(path)
     missing = [k for k in ("ts", "imu") if k not in mat]
     if missing:
-        raise InputFormatError(f"{path}: a PyShoe trial needs fields ts and imu; missing {', '.join(missing)}")
+        raise InputFormatError(
+            f"{path}: a PyShoe trial needs fields ts and imu; missing {', '.join(missing)}"
+        )
     t = _mat_f64(mat, "ts", path).ravel()
     imu = _mat_f64(mat, "imu", path)
     if t.size < 2 or imu.ndim != 2 or imu.shape != (t.size, 6):
@@ -148,7 +150,9 @@ def load_xio_csv(path: Path) -> Recording:
     """
     header = _csv_header(path)
     if tuple(h.strip() for h in header[: len(XIO_COLUMNS)]) != XIO_COLUMNS:
-        raise InputFormatError(f"{path}: expected an x-io CSV with columns {', '.join(XIO_COLUMNS)}; got {header}")
+        raise InputFormatError(
+            f"{path}: expected an x-io CSV with columns {', '.join(XIO_COLUMNS)}; got {header}"
+        )
     data = _read_numeric_csv(path, skip=1, ncols=7)
     t = data[:, 0]
     return Recording(
@@ -243,7 +247,9 @@ class CsvMapping:
             elif key in ("acc", "gyr"):
                 cols = tuple(names.split(";"))
                 if len(cols) != 3:
-                    raise InputFormatError(f"--columns {key}= needs three column names separated by ';', got {names!r}")
+                    raise InputFormatError(
+                        f"--columns {key}= needs three column names separated by ';', got {names!r}"
+                    )
                 fields[key] = cols
                 if unit:
                     fields[f"{key}_unit"] = unit
@@ -252,7 +258,9 @@ class CsvMapping:
             elif key == "closed_loop":
                 fields["closed_loop"] = value.lower() in ("1", "true", "yes")
             else:
-                raise InputFormatError(f"unknown --columns key {key!r}; use time, acc, gyr, profile, closed_loop")
+                raise InputFormatError(
+                    f"unknown --columns key {key!r}; use time, acc, gyr, profile, closed_loop"
+                )
         return CsvMapping(**fields)  # type: ignore[arg-type]
 
 
@@ -270,7 +278,9 @@ def load_generic_csv(path: Path, mapping: CsvMapping | None = None) -> Recording
     wanted = [m.time, *m.acc, *m.gyr]
     missing = [c for c in wanted if c not in header]
     if missing:
-        raise InputFormatError(f"{path}: columns {', '.join(missing)} not found; the header has {', '.join(header)}")
+        raise InputFormatError(
+            f"{path}: columns {', '.join(missing)} not found; the header has {', '.join(header)}"
+        )
     data = _read_numeric_csv(path, skip=1, ncols=len(header))[:, [header.index(c) for c in wanted]]
     t = data[:, 0] * TIME_UNITS[m.time_unit]
     return Recording(
@@ -301,7 +311,9 @@ def _read_numeric_csv(path: Path, skip: int, ncols: int) -> F64:
     except ValueError as exc:
         raise InputFormatError(f"{path}: non-numeric values in the data rows ({exc})") from None
     if data.shape[1] < ncols or data.shape[0] < 2:
-        raise InputFormatError(f"{path}: expected at least 2 rows of {ncols} numeric columns, got {data.shape}")
+        raise InputFormatError(
+            f"{path}: expected at least 2 rows of {ncols} numeric columns, got {data.shape}"
+        )
     out: F64 = data
     return out
 

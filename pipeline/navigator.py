@@ -123,12 +123,18 @@ def filter_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float,
     with the profile's motion noise.
     """
     par = np.zeros(eskf.N_PAR)
-    par[eskf.PAR_SIG_ACC] = math.hypot(profile.acc_noise_mps2_rthz * math.sqrt(rate_hz), profile.motion_acc_mps2)
-    par[eskf.PAR_SIG_GYR] = math.hypot(profile.gyr_noise_radps_rthz * math.sqrt(rate_hz), profile.motion_gyr_radps)
+    par[eskf.PAR_SIG_ACC] = math.hypot(
+        profile.acc_noise_mps2_rthz * math.sqrt(rate_hz), profile.motion_acc_mps2
+    )
+    par[eskf.PAR_SIG_GYR] = math.hypot(
+        profile.gyr_noise_radps_rthz * math.sqrt(rate_hz), profile.motion_gyr_radps
+    )
     par[eskf.PAR_BA_RW] = profile.acc_bias_rw_mps3_rthz
     par[eskf.PAR_BG_RW] = profile.gyr_bias_rw_radps2_rthz
     par[eskf.PAR_ZUPT] = profile.zupt_sigma_mps
-    par[eskf.PAR_ZARU] = math.hypot(profile.zaru_sigma_radps, profile.gyr_noise_radps_rthz * math.sqrt(rate_hz))
+    par[eskf.PAR_ZARU] = math.hypot(
+        profile.zaru_sigma_radps, profile.gyr_noise_radps_rthz * math.sqrt(rate_hz)
+    )
     par[eskf.PAR_G] = gravity_mps2
     par[eskf.PAR_DT_MAX] = dt_max_s
     par[eskf.PAR_ZARU_GATE] = ZARU_GATE_CHI2_3DOF
@@ -261,7 +267,9 @@ class Navigator:
         need = max(2, round(cfg.align_s * self.rate_hz))
         kernel = np.ones(need) / need
         # the centred window's mean |f|, normalised at the ends where the window is cut short
-        mean_f = np.convolve(norm_f, kernel, mode="same") / np.convolve(np.ones_like(norm_f), kernel, mode="same")
+        mean_f = np.convolve(norm_f, kernel, mode="same") / np.convolve(
+            np.ones_like(norm_f), kernel, mode="same"
+        )
         with np.errstate(invalid="ignore"):
             quiet: NDArray[np.bool_] = (rate < cfg.align_max_rate_radps) & (
                 np.abs(norm_f - mean_f) < cfg.align_max_acc_dev_mps2
@@ -460,6 +468,7 @@ def _first_run(mask: NDArray[np.bool_], length: int) -> int:
     return int(hits[0]) if hits.size else -1
 
 
+
 def navigate(
     t_s: F64,
     acc_b_mps2: F64,
@@ -476,5 +485,7 @@ def navigate(
     if ranges is not None:
         nav.add_ranges(ranges)
     n = t_s.shape[0]
-    out = nav.process(ImuBatch(t_s, acc_b_mps2, gyr_b_radps, np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64)))
+    out = nav.process(
+        ImuBatch(t_s, acc_b_mps2, gyr_b_radps, np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64))
+    )
     return out, nav.stats

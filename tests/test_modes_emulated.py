@@ -40,7 +40,9 @@ def walk() -> GaitTruth:
     return simulate_walk("rectangle", 25.0, seed=1)
 
 
-def synth(n: int, k: int = 4, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def synth(
+    n: int, k: int = 4, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
     t = np.arange(n) / 1000.0
     acc = rng.normal(0, 5, (n, 3))
@@ -172,7 +174,9 @@ async def test_2015_unit_is_detected_by_its_start_ack() -> None:
 async def test_raw_imu_any_subset(mask: int, k: int) -> None:
     n = 1500
     t, acc, gyr, imu_acc, imu_gyr = synth(n, k=k)
-    with PtyShoeServer(t, acc, gyr, speed=math.inf, imu_acc_b_mps2=imu_acc, imu_gyr_b_radps=imu_gyr) as server:
+    with PtyShoeServer(
+        t, acc, gyr, speed=math.inf, imu_acc_b_mps2=imu_acc, imu_gyr_b_radps=imu_gyr
+    ) as server:
         async with await OpenShoeUnit.open_serial(server.port) as unit:
             await unit.start(RawImuMode(imu_mask=mask, rate_divider_log2=0))
             got = of(await gather(unit, RawImuBatch, n), RawImuBatch)
@@ -209,7 +213,9 @@ async def test_ins_states_in_footnav_frame(walk: GaitTruth) -> None:
 async def test_extension_states_interleave_with_the_imu_stream(walk: GaitTruth) -> None:
     tof = tof_readings(walk.t_s, walk.pos_n_m, walk.quat_nb_wxyz, floor_of("line"))
     baro = baro_from_height(walk.t_s, walk.pos_n_m[:, 2])
-    with PtyShoeServer(walk.t_s, walk.acc_b_mps2, walk.gyr_b_radps, speed=math.inf, tof=tof, baro=baro) as server:
+    with PtyShoeServer(
+        walk.t_s, walk.acc_b_mps2, walk.gyr_b_radps, speed=math.inf, tof=tof, baro=baro
+    ) as server:
         async with await OpenShoeUnit.open_serial(server.port) as unit:
             await unit.start(NormalImuMode(rate_divider_log2=3))
             await unit.enable_extensions(tof=True, baro=True)

@@ -268,7 +268,9 @@ class RerunLogger:
             if not self._closed:
                 self._queue.put(_Dual(run, view))
 
-    def log_truth(self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT) -> None:
+    def log_truth(
+        self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT
+    ) -> None:
         """Log a ground-truth track: positions (n, 3), m, at device times (n,), s. Never blocks."""
         if foot not in self._paths:
             raise ValueError(f"foot {foot!r} was not declared; this logger has feet={self.feet}")
@@ -436,7 +438,9 @@ class RerunLogger:
             arrays, paths, ellipsoid_every=self._ellipsoid_every, first_index=first, series_every=self._series_every
         )
         onsets = convert.step_onsets(nav.stance, self._last_stance[foot])
-        columns_list += convert.step_columns(arrays, nav.pos_cov_n_m2, onsets, paths, sigma_scale=self._sigma_scale)
+        columns_list += convert.step_columns(
+            arrays, nav.pos_cov_n_m2, onsets, paths, sigma_scale=self._sigma_scale
+        )
         columns_list += convert.tof_columns(nav, paths, self._tof_totals.setdefault(foot, np.zeros(3, np.int64)))
         if nav.floor_z_m is not None or foot in self._swing:  # a ToF unit: its floor is tracked
             tracker = self._swing.setdefault(foot, SwingClearanceTracker(TofConfig().snap_m))
@@ -474,7 +478,9 @@ class RerunLogger:
                 paths.rate, indexes=[index], columns=rr.Scalars.columns(scalars=[i.rate_hz for i in items])
             )
             errors = np.array([[i.lost_packets, i.reconnects] for i in items], dtype=np.float64)
-            self.recording.send_columns(paths.link_errors, indexes=[index], columns=rr.Scalars.columns(scalars=errors))
+            self.recording.send_columns(
+                paths.link_errors, indexes=[index], columns=rr.Scalars.columns(scalars=errors)
+            )
 
     def _send_lines(self, final: bool) -> None:
         """Re-log each foot's decimated track line if it grew and ≥ LINE_PERIOD_S passed (device and wall)."""

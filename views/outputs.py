@@ -130,7 +130,9 @@ class SessionViews:
         for out in self.live:
             out.logger.log_event(text, level=level, t_s=t_s)
 
-    def log_truth(self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT) -> None:
+    def log_truth(
+        self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT
+    ) -> None:
         for out in self.live:
             out.logger.log_truth(pos_n_m, t_s=t_s, foot=foot)
 
@@ -143,7 +145,9 @@ class SessionViews:
         self, *, foot: str = DEFAULT_FOOT, t_s: float, rate_hz: float, lost_packets: int, reconnects: int = 0
     ) -> None:
         for out in self.live:
-            out.logger.log_link(foot=foot, t_s=t_s, rate_hz=rate_hz, lost_packets=lost_packets, reconnects=reconnects)
+            out.logger.log_link(
+                foot=foot, t_s=t_s, rate_hz=rate_hz, lost_packets=lost_packets, reconnects=reconnects
+            )
 
     def close(self) -> list[str]:
         """Close every live output (file footers written); returns notes on what did not close cleanly."""

@@ -241,7 +241,9 @@ def choose_sinks(
                 fallback = True
             else:
                 sinks.append(rr.GrpcSink(url))
-                notes.append(f"streaming to a Rerun viewer (pid {proc.pid}, {url}, memory limit {memory_limit})")
+                notes.append(
+                    f"streaming to a Rerun viewer (pid {proc.pid}, {url}, memory limit {memory_limit})"
+                )
         else:
             notes.append("no display (neither DISPLAY nor WAYLAND_DISPLAY is set): no viewer")
             fallback = True

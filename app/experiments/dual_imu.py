@@ -149,13 +149,7 @@ def evaluate_run(
         rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, stance, lever, rec.rate_hz, PaperConfig(profile=profile)
     )
     footnav = run_dual_eskf(
-        rec.t_s,
-        rec.acc_b_mps2,
-        rec.gyr_b_radps,
-        stance,
-        lever,
-        rec.rate_hz,
-        DualEskfConfig(profile=profile),
+        rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, stance, lever, rec.rate_hz, DualEskfConfig(profile=profile),
         zupt_ratio(stat, threshold),
     )
     tracks["paper"] = paper.pos1_n_m

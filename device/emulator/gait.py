@@ -115,7 +115,9 @@ _PITCH_JITTER_RAD = math.radians(2.0)
 
 def _bump(m: int, k: int) -> F64:
     """Coefficients (lowest order first) of ``τ^m (1 − τ)^k`` scaled to peak 1 at ``τ = m / (m + k)``."""
-    coef = np.asarray(npoly.polymul(npoly.polypow([0.0, 1.0], m), npoly.polypow([1.0, -1.0], k)), dtype=np.float64)
+    coef = np.asarray(
+        npoly.polymul(npoly.polypow([0.0, 1.0], m), npoly.polypow([1.0, -1.0], k)), dtype=np.float64
+    )
     return coef / float(npoly.polyval(m / (m + k), coef))
 
 
@@ -423,7 +425,9 @@ def simulate_walk(
     c1 = _poly(_CLEAR_D1, tau) / dur_s
     pos_n_m[sw, 2] = start_m[:, 2] + rise_m * _poly(_SMOOTHSTEP, u) + height_m * c0
     vel_n_mps[sw, 2] = rise_m * _poly(_SMOOTHSTEP_D1, u) / dur_u_s + height_m * c1
-    acc_n_mps2[sw, 2] = rise_m * _poly(_SMOOTHSTEP_D2, u) / dur_u_s**2 + height_m * _poly(_CLEAR_D2, tau) / dur_s**2
+    acc_n_mps2[sw, 2] = (
+        rise_m * _poly(_SMOOTHSTEP_D2, u) / dur_u_s**2 + height_m * _poly(_CLEAR_D2, tau) / dur_s**2
+    )
     edges_crossed = np.floor(s0 * np.abs(steps) + 0.5)
     floor_z_m[sw] = start_m[:, 2] + np.sign(steps) * feet.riser_m * edges_crossed
 
@@ -437,7 +441,9 @@ def simulate_walk(
     roll_rate_radps[sw] = roll_rad[i] * c1
 
     quat_nb_wxyz = euler_zyx_to_quat_wxyz(yaw_rad, pitch_rad, roll_rad_all)
-    gyr_b_radps = euler_zyx_rates_to_gyr_b(pitch_rad, roll_rad_all, yaw_rate_radps, pitch_rate_radps, roll_rate_radps)
+    gyr_b_radps = euler_zyx_rates_to_gyr_b(
+        pitch_rad, roll_rad_all, yaw_rate_radps, pitch_rate_radps, roll_rate_radps
+    )
     specific_force_n_mps2 = acc_n_mps2.copy()
     specific_force_n_mps2[:, 2] += GRAVITY_MPS2
     acc_b_mps2 = rotate_n_to_b_zyx(yaw_rad, pitch_rad, roll_rad_all, specific_force_n_mps2)

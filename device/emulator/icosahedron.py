@@ -210,23 +210,11 @@ class Miscalibration:
 
     theta: F64 = field(
         default_factory=lambda: np.array(
-            [
-                1.012,
-                0.991,
-                1.007,  # scale: +1.2 %, −0.9 %, +0.7 %
-                math.radians(0.8),
-                math.radians(-0.6),
-                math.radians(1.1),  # misalignment, rad
-                0.35,
-                -0.25,
-                0.45,  # bias, m/s² (36, −25, 46 mg)
-                2e-4,
-                -1.5e-4,
-                1e-4,  # scale slope, 1/°C
-                4e-3,
-                -3e-3,
-                5e-3,
-            ]  # bias slope, m/s²/°C (0.4, −0.3, 0.5 mg/°C)
+            [1.012, 0.991, 1.007,  # scale: +1.2 %, −0.9 %, +0.7 %
+             math.radians(0.8), math.radians(-0.6), math.radians(1.1),  # misalignment, rad
+             0.35, -0.25, 0.45,  # bias, m/s² (36, −25, 46 mg)
+             2e-4, -1.5e-4, 1e-4,  # scale slope, 1/°C
+             4e-3, -3e-3, 5e-3]  # bias slope, m/s²/°C (0.4, −0.3, 0.5 mg/°C)
         )
     )
     gyr_bias_radps: F64 = field(default_factory=lambda: np.radians([0.8, -1.2, 0.5]))

@@ -375,7 +375,9 @@ def corrupt(
     acc_in = np.asarray(truth_acc_b, dtype=np.float64)
     gyr_in = np.asarray(truth_gyr_b, dtype=np.float64)
     if acc_in.ndim != 2 or acc_in.shape[1] != 3 or acc_in.shape != gyr_in.shape:
-        raise ValueError(f"expected two (n, 3) arrays of the same shape, got {acc_in.shape} and {gyr_in.shape}")
+        raise ValueError(
+            f"expected two (n, 3) arrays of the same shape, got {acc_in.shape} and {gyr_in.shape}"
+        )
     if not rate_hz > 0.0:
         raise ValueError(f"sample rate must be positive, got {rate_hz} Hz")
     if not math.isfinite(gyr_delay_s):
@@ -390,8 +392,12 @@ def corrupt(
     rng = np.random.default_rng(seed)
     acc_turn_on = grade.acc_bias_sigma_mps2 * rng.standard_normal(3)
     gyr_turn_on = grade.gyr_bias_sigma_radps * rng.standard_normal(3)
-    acc_drift = gauss_markov(n, grade.acc_bias_instability_mps2, grade.bias_correlation_time_s, rate_hz, rng=rng)
-    gyr_drift = gauss_markov(n, grade.gyr_bias_instability_radps, grade.bias_correlation_time_s, rate_hz, rng=rng)
+    acc_drift = gauss_markov(
+        n, grade.acc_bias_instability_mps2, grade.bias_correlation_time_s, rate_hz, rng=rng
+    )
+    gyr_drift = gauss_markov(
+        n, grade.gyr_bias_instability_radps, grade.bias_correlation_time_s, rate_hz, rng=rng
+    )
     acc_noise = grade.acc_noise_sigma_mps2(rate_hz) * rng.standard_normal((n, 3))
     gyr_noise = grade.gyr_noise_sigma_radps(rate_hz) * rng.standard_normal((n, 3))
     acc_bias = acc_turn_on + acc_drift

@@ -231,8 +231,12 @@ def _tile(
     end_pos_m = lap_pos_m[-1]
     end_yaw_rad = lap_yaw_rad[-1]
     laps = np.arange(n_laps, dtype=np.float64)
-    centre_m = np.concatenate([lap_pos_m[:1], (lap_pos_m[None, 1:] + laps[:, None, None] * end_pos_m).reshape(-1, 3)])
-    yaw_rad = np.concatenate([lap_yaw_rad[:1], (lap_yaw_rad[None, 1:] + laps[:, None] * end_yaw_rad).reshape(-1)])
+    centre_m = np.concatenate(
+        [lap_pos_m[:1], (lap_pos_m[None, 1:] + laps[:, None, None] * end_pos_m).reshape(-1, 3)]
+    )
+    yaw_rad = np.concatenate(
+        [lap_yaw_rad[:1], (lap_yaw_rad[None, 1:] + laps[:, None] * end_yaw_rad).reshape(-1)]
+    )
     steps = np.tile(lap_steps, n_laps)
     left_n = np.column_stack([-np.sin(yaw_rad), np.cos(yaw_rad), np.zeros_like(yaw_rad)])
     pos_n_m = centre_m + lateral_offset_m * left_n
@@ -266,7 +270,9 @@ def line(n_strides: int, stride_length_m: float, lateral_offset_m: float = RIGHT
     return _tile([("straight", stride_length_m)], n_strides, stride_length_m, lateral_offset_m, closed=False)
 
 
-def rectangle(n_strides: int, stride_length_m: float, lateral_offset_m: float = RIGHT_FOOT_OFFSET_M) -> Footholds:
+def rectangle(
+    n_strides: int, stride_length_m: float, lateral_offset_m: float = RIGHT_FOOT_OFFSET_M
+) -> Footholds:
     """Footholds of laps of the 18 m × 9 m rectangle, counter-clockwise (see the module docstring)."""
     length_m, width_m = RECTANGLE_SIZE_M
     r = RECTANGLE_CORNER_RADIUS_M
@@ -280,14 +286,18 @@ def rectangle(n_strides: int, stride_length_m: float, lateral_offset_m: float = 
     return _tile(segments, n_strides, stride_length_m, lateral_offset_m, closed=True)
 
 
-def figure8(n_strides: int, stride_length_m: float, lateral_offset_m: float = RIGHT_FOOT_OFFSET_M) -> Footholds:
+def figure8(
+    n_strides: int, stride_length_m: float, lateral_offset_m: float = RIGHT_FOOT_OFFSET_M
+) -> Footholds:
     """Footholds of laps of the figure eight: a left loop then a right loop of radius 4 m."""
     r = FIGURE8_RADIUS_M
     segments: list[Segment] = [("arc", r, 2 * math.pi), ("arc", r, -2 * math.pi)]
     return _tile(segments, n_strides, stride_length_m, lateral_offset_m, closed=True)
 
 
-def stairs(n_strides: int, stride_length_m: float, lateral_offset_m: float = RIGHT_FOOT_OFFSET_M) -> Footholds:
+def stairs(
+    n_strides: int, stride_length_m: float, lateral_offset_m: float = RIGHT_FOOT_OFFSET_M
+) -> Footholds:
     """Footholds of laps of the stair course: up 24 steps, landing, turn round, down, turn round.
 
     The start foothold is on the ground half a tread before the first riser, so the first stride

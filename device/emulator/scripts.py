@@ -149,7 +149,9 @@ def reset_indices(
     return np.asarray(out, dtype=np.int64)
 
 
-def steps_from_truth(t_s: F64, pos_n_m: F64, yaw_rad: F64, stance: NDArray[np.bool_], **reset_kw: float) -> StepScript:
+def steps_from_truth(
+    t_s: F64, pos_n_m: F64, yaw_rad: F64, stance: NDArray[np.bool_], **reset_kw: float
+) -> StepScript:
     """The SWDR packets a unit would send for a true trajectory (see the module docstring).
 
     Args:
