@@ -43,6 +43,11 @@ MARGIN_S = 0.25
 MIN_SUPPORT = 6
 """Hits (itself included) within ``snap_m`` of a hit's height for it to count (module docstring)."""
 
+MAX_SWING_S = 2.0
+"""A run without stance longer than this is not a stride's swing (a walking swing lasts about 0.4 s,
+a slow one under 1 s): the foot is carried, or the detector misses stances. Its samples keep their
+live clearance and are returned at once, so neither the wait nor the buffers grow with it."""
+
 
 class SwingClearanceTracker:
     """Streaming swing-complete clearance (module docstring): feed the navigator's batches in order;
@@ -60,6 +65,8 @@ class SwingClearanceTracker:
         self._hits = np.empty((0, 4))
         self._before: tuple[float, float, float] | None = None
         """x, y and floor height of the last sample returned (where a swing that starts next began)."""
+        self._long_run = False
+        """The buffer starts inside a run without stance longer than MAX_SWING_S (passed through)."""
 
     def update(
         self, t_s: F64, pos_n_m: F64, stance: NDArray[np.bool_], clearance_m: F64, ranges: RangeOutputs | None
@@ -86,19 +93,24 @@ class SwingClearanceTracker:
         out = self._clear.copy()
         swing = ~self._stance
         done, a = n, 0
-        while True:
+        if self._long_run:  # the rest of a long run without stance goes through as it is
+            stances = np.flatnonzero(self._stance)
+            a = int(stances[0]) if stances.size else n
+            self._long_run = a == n
+        while a < n:
             starts = np.flatnonzero(swing[a:])
             if starts.size == 0:
                 break  # the rest is stance: final as it is
             a += int(starts[0])
             ends = np.flatnonzero(~swing[a:])
             b = a + int(ends[0]) if ends.size else n
-            if not final and (b == n or t[-1] < t[b] + self.margin_s):
+            if t[b - 1] - t[a] > MAX_SWING_S:  # not a stride's swing: live values, at once
+                self._long_run = b == n
+            elif not final and (b == n or t[-1] < t[b] + self.margin_s):
                 done = a  # the swing's hits are not all in yet
                 break
-            self._look_up(out, a, b)
-            if b == n:
-                break
+            else:
+                self._look_up(out, a, b)
             a = b
         if done:
             self._before = (

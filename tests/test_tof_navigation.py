@@ -15,7 +15,7 @@ from pipeline.navigator import NavConfig, Navigator, navigate
 from pipeline.profiles import get_profile
 from pipeline.samples import ImuBatch
 from pipeline.swing_clearance import SwingClearanceTracker, swing_clearance
-from pipeline.tof_aiding import RangeBatch, TofConfig
+from pipeline.tof_aiding import RangeBatch, RangeOutputs, TofConfig
 
 
 @pytest.fixture(scope="module")
@@ -257,3 +257,41 @@ def test_experiment_command_prints_the_side_by_side_table(capsys: pytest.Capture
     assert len(rows) == 6  # three walks, each with and without the ToF channel
     assert sum("ZUPT+ToF" in r and "used" in r for r in rows) == 3
     assert sum("lower with ToF" in line for line in out) == 3
+
+
+def test_whole_swing_clearance_passes_a_long_run_without_stance_through_at_once() -> None:
+    """A foot carried (no stance for 5 s): after MAX_SWING_S its samples come back in the call that
+    brought them, with their live clearance; the buffers do not grow; the next real swing is looked up."""
+    rate = 100.0
+    t = np.arange(0, 8.0, 1 / rate)
+    stance = np.ones(t.size, dtype=bool)
+    stance[100:600] = False  # 5 s carried
+    stance[700:740] = False  # then one 0.4 s swing over a raised surface seen by the sensors
+    pos = np.zeros((t.size, 3))
+    pos[:, 0] = np.linspace(0.0, 4.0, t.size)
+    pos[:, 2] = 0.05
+    live = np.full(t.size, 0.05)
+    r_t = np.arange(0.0, 8.0, 0.01) + 0.005
+    hit = np.column_stack([np.interp(r_t, t, pos[:, 0]), np.zeros(r_t.size), np.where(r_t > 7.2, 0.02, 0.0)])
+    ranges = RangeOutputs(
+        r_t, np.zeros(r_t.size, np.int64), np.zeros(r_t.size, np.uint8), np.full(r_t.size, 0.05),
+        np.zeros(r_t.size, np.int64), np.zeros(r_t.size), np.zeros(r_t.size), hit, np.zeros(r_t.size, bool),
+    )
+    tracker = SwingClearanceTracker(0.004)
+    out_t, out_c = [], []
+    for a in range(0, t.size, 10):
+        sel = (r_t > (t[a - 1] if a else -1.0)) & (r_t <= t[a + 9])
+        part = dataclasses.replace(ranges, **{f.name: getattr(ranges, f.name)[sel] for f in dataclasses.fields(ranges)})
+        got_t, got_c = tracker.update(t[a : a + 10], pos[a : a + 10], stance[a : a + 10], live[a : a + 10], part)
+        if 350 <= a < 590:  # well into the carried run: this call's samples come back at once
+            np.testing.assert_array_equal(got_t, t[a : a + 10])
+            assert len(tracker._t) == 0
+        out_t.append(got_t)
+        out_c.append(got_c)
+    got_t, got_c = tracker.finish()
+    out_t.append(got_t)
+    out_c.append(got_c)
+    c = np.concatenate(out_c)
+    np.testing.assert_array_equal(np.concatenate(out_t), t)
+    np.testing.assert_array_equal(c[:700], live[:700])  # the carried run keeps its live values
+    assert np.all(c[725:740] < 0.04)  # the short swing's later part: 2 cm up, looked up from its hits
