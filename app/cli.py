@@ -262,7 +262,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     export = sub.add_parser("export", help="navigate a recording and write one CSV row per sample")
     export.add_argument(
-        "input", type=Path, metavar="INPUT", help="a PyShoe .mat, x-io CSV, OpenShoe log or CSV"
+        "input", type=Path, metavar="INPUT", help="a PyShoe .mat, x-io CSV, OpenShoe log, CSV, or a footnav capture"
     )
     export.add_argument(
         "-o", "--output", type=Path, required=True, metavar="TRACK.csv", help="where to write"

@@ -1,8 +1,15 @@
-"""``footnav export``: a recording -> one CSV row per sample of the navigation solution."""
+"""``footnav export``: a recording -> one CSV row per sample of the navigation solution.
+
+A recording from another tool is loaded (``pipeline.loaders``) and navigated here; a footnav capture
+(``.mcap``) is replayed headless through the same device decoding and pipeline as ``footnav replay``
+(so its rows are the live estimates, bit for bit), one file per foot, and a ToF unit's rows carry its
+clearance too (:data:`CLEARANCE_COLUMNS`).
+"""
 
 from __future__ import annotations
 
 import csv
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +20,8 @@ from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavConfig, NavStats, navigate
 from pipeline.profiles import get_profile
 from pipeline.saturation import reconstruct_saturated_rates
+from pipeline.swing_clearance import swing_clearance
+from pipeline.tof_aiding import TofConfig
 
 EXPORT_COLUMNS = (
     "t",
@@ -60,16 +69,27 @@ def navigate_recording(
     return nav, stats
 
 
+CLEARANCE_COLUMNS = ("clearance", "clearance_swing", "floor_z")
+"""Added for a ToF unit: the live clearance above the floor under the IMU, the one from each swing's
+hits past and future (``pipeline.swing_clearance``), and the height of that floor, m (NaN before the
+unit's first range reading, where the clearance is the height above the start floor)."""
+
+
 def write_track_csv(nav: NavBatch, path: Path) -> None:
-    """Write ``EXPORT_COLUMNS``: SI units, navigation frame right-handed z up, origin at the start."""
+    """Write ``EXPORT_COLUMNS`` (and, for a ToF unit, ``CLEARANCE_COLUMNS``): SI units, navigation frame
+    right-handed z up, origin at the start."""
     var = np.diagonal(nav.pos_cov_n_m2, axis1=1, axis2=2)
-    table = np.column_stack(
-        [nav.t_s, nav.pos_n_m, nav.vel_n_mps, nav.quat_nb_wxyz, nav.stance.astype(np.float64), var]
-    )
+    columns = [nav.t_s, nav.pos_n_m, nav.vel_n_mps, nav.quat_nb_wxyz, nav.stance.astype(np.float64), var]
+    names: tuple[str, ...] = EXPORT_COLUMNS
+    if nav.floor_z_m is not None and nav.ranges is not None:
+        swing = swing_clearance(nav.t_s, nav.pos_n_m, nav.stance, nav.clearance_m, nav.ranges, TofConfig().snap_m)
+        columns += [nav.clearance_m, swing, nav.floor_z_m]
+        names = EXPORT_COLUMNS + CLEARANCE_COLUMNS
+    table = np.column_stack(columns)
     try:
         with path.open("w", newline="") as f:
             writer = csv.writer(f)
-            writer.writerow(EXPORT_COLUMNS)
+            writer.writerow(names)
             stance_col = EXPORT_COLUMNS.index("stance")
             for row in table:
                 writer.writerow([int(v) if i == stance_col else f"{v:.9g}" for i, v in enumerate(row)])
@@ -81,6 +101,15 @@ def run_export(
     source: Path, out: Path, *, fmt: str | None, columns: str | None, profile: str | None, smooth: bool
 ) -> str:
     """Load, navigate and write; returns a one-line summary."""
+    if source.suffix.lower() == ".mcap":
+        given = [name for name, v in (("--format", fmt), ("--columns", columns), ("--profile", profile)) if v]
+        if given or smooth:
+            raise FootnavError(
+                f"{source} is a footnav capture: it is exported with the settings it was recorded with "
+                f"(without {', '.join([*given, *(['--smooth'] if smooth else [])])}; the smoother does not "
+                "take the ToF channel)"
+            )
+        return export_capture(source, out)
     rec = load_recording(source, fmt, CsvMapping.parse(columns) if columns else None)
     nav, stats = navigate_recording(rec, profile, smooth)
     write_track_csv(nav, out)
@@ -92,3 +121,29 @@ def run_export(
     return (
         f"wrote {len(nav)} rows to {out} ({rec.format} recording, profile {profile or rec.profile}{skipped})"
     )
+
+
+def export_capture(source: Path, out: Path) -> str:
+    """Replay a footnav capture headless and write each foot's rows (``out`` for one foot, else
+    ``<stem>-<foot><suffix>`` beside it); returns a one-line summary."""
+    from app.config import defaults
+    from app.replay import ReplayOptions, run_replay
+    from views.convert import concat_batches
+
+    got: dict[str, list[NavBatch]] = {}
+
+    def collect(foot: str) -> Callable[[NavBatch], None]:
+        return got.setdefault(foot, []).append
+
+    if run_replay(ReplayOptions(path=source, config=defaults(), viewer=False, collect=collect)) != 0:
+        raise FootnavError(f"{source}: the replay failed; nothing written")
+    feet = [foot for foot, batches in got.items() if batches]
+    if not feet:
+        raise FootnavError(f"{source}: the capture never stood still long enough to align; nothing written")
+    written = []
+    for foot in feet:
+        path = out if len(feet) == 1 else out.with_name(f"{out.stem}-{foot}{out.suffix}")
+        nav = concat_batches(got[foot])
+        write_track_csv(nav, path)
+        written.append(f"{len(nav)} rows to {path}{' with clearance' if nav.floor_z_m is not None else ''}")
+    return f"wrote {'; '.join(written)} (footnav capture, replayed)"

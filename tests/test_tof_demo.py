@@ -8,11 +8,16 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from app.config import defaults
 from app.demo import DemoOptions, demo_truth, run_demo
+from app.export import CLEARANCE_COLUMNS, EXPORT_COLUMNS, run_export
 from app.replay import ReplayOptions, run_replay
+from pipeline.errors import FootnavError
 from pipeline.nav_types import NavBatch
+from pipeline.swing_clearance import swing_clearance
+from pipeline.tof_aiding import TofConfig
 from views.convert import concat_batches
 
 
@@ -68,6 +73,19 @@ def test_demo_with_tof_sensors_live_and_replayed(tmp_path: Path) -> None:
     got_i, make_i = _collector()
     assert run_replay(ReplayOptions(path=path, config=defaults(), viewer=False, collect=make_i, stance="inertial")) == 0
     assert np.any(concat_batches(got_i["foot"]).stance != live.stance)  # the override is what decides
+
+    # exported to CSV: the live rows, with the clearance columns; the capture's own settings only
+    out = tmp_path / "track.csv"
+    assert "with clearance" in run_export(path, out, fmt=None, columns=None, profile=None, smooth=False)
+    rows = np.genfromtxt(out, delimiter=",", names=True)
+    assert rows.dtype.names == EXPORT_COLUMNS + CLEARANCE_COLUMNS
+    assert live.ranges is not None
+    np.testing.assert_allclose(np.column_stack([rows["x"], rows["y"], rows["z"]]), live.pos_n_m, rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(rows["clearance"], live.clearance_m, rtol=1e-8, atol=1e-12)
+    swing = swing_clearance(live.t_s, live.pos_n_m, live.stance, live.clearance_m, live.ranges, TofConfig().snap_m)
+    np.testing.assert_allclose(rows["clearance_swing"], swing, rtol=1e-8, atol=1e-12)
+    with pytest.raises(FootnavError, match="footnav capture"):
+        run_export(path, tmp_path / "s.csv", fmt=None, columns=None, profile=None, smooth=True)
 
     got_n, make_n = _collector()
     assert run_replay(ReplayOptions(path=path, config=defaults(), viewer=False, collect=make_n, tof=False)) == 0
