@@ -101,7 +101,7 @@ def run_export(
     source: Path, out: Path, *, fmt: str | None, columns: str | None, profile: str | None, smooth: bool
 ) -> str:
     """Load, navigate and write; returns a one-line summary."""
-    if source.suffix.lower() == ".mcap":
+    if _is_capture(source):
         given = [name for name, v in (("--format", fmt), ("--columns", columns), ("--profile", profile)) if v]
         if given or smooth:
             raise FootnavError(
@@ -121,6 +121,15 @@ def run_export(
     return (
         f"wrote {len(nav)} rows to {out} ({rec.format} recording, profile {profile or rec.profile}{skipped})"
     )
+
+
+def _is_capture(path: Path) -> bool:
+    """The file starts with MCAP's magic bytes (footnav's captures; ``app.replay`` checks the rest)."""
+    try:
+        with path.open("rb") as f:
+            return f.read(8) == b"\x89MCAP0\r\n"
+    except OSError:
+        return False  # the loaders say what is wrong with it
 
 
 def export_capture(source: Path, out: Path) -> str:
