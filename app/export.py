@@ -103,11 +103,15 @@ def run_export(
     """Load, navigate and write; returns a one-line summary."""
     if _is_capture(source):
         given = [name for name, v in (("--format", fmt), ("--columns", columns), ("--profile", profile)) if v]
-        if given or smooth:
+        if given:
             raise FootnavError(
-                f"{source} is a footnav capture: it is exported with the settings it was recorded with "
-                f"(without {', '.join([*given, *(['--smooth'] if smooth else [])])}; the smoother does not "
-                "take the ToF channel)"
+                f"{source} is a footnav capture, exported with the settings it was recorded with; "
+                f"drop {', '.join(given)}"
+            )
+        if smooth:
+            raise FootnavError(
+                f"{source} is a footnav capture: --smooth is not available for captures (the smoother does not "
+                "take the ToF channel); drop it for the live estimates"
             )
         return export_capture(source, out)
     rec = load_recording(source, fmt, CsvMapping.parse(columns) if columns else None)
