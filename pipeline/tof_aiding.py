@@ -529,7 +529,7 @@ def floor_from_hits(
         hits: (k, 4) hit points: x, y, surface height (a known level, or where the ray hit), 1.0 when
             the height is a known level, else 0.0.
         snap_m: hits within this height of each other are on the same surface.
-        default_z_m: the floor when no hit is confirmed by another.
+        default_z_m: the floor when no hit has ``min_support`` hits at its height.
         swing_origin: where the swing began (x, y); None in stance (the nearest hit's floor then).
         narrow: narrows a step edge's bracket with edges learned before, or None.
         min_support: a hit counts when this many hits (itself included) lie within ``snap_m`` of its

@@ -442,8 +442,10 @@ class RerunLogger:
             arrays, nav.pos_cov_n_m2, onsets, paths, sigma_scale=self._sigma_scale
         )
         columns_list += convert.tof_columns(nav, paths, self._tof_totals.setdefault(foot, np.zeros(3, np.int64)))
-        if nav.floor_z_m is not None or foot in self._swing:  # a ToF unit: its floor is tracked
-            tracker = self._swing.setdefault(foot, SwingClearanceTracker(TofConfig().snap_m))
+        tracker = self._swing.get(foot)
+        if tracker is None and nav.floor_z_m is not None:  # a ToF unit: its floor is tracked from now on
+            tracker = self._swing[foot] = SwingClearanceTracker(TofConfig().snap_m)
+        if tracker is not None:
             done = tracker.update(nav.t_s, nav.pos_n_m, nav.stance, nav.clearance_m, nav.ranges)
             columns_list += convert.series_columns(paths.swing_clearance, *done)
         for path, index, columns in columns_list:
