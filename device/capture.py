@@ -59,11 +59,15 @@ FLUSH_PERIOD_S: Final = 1.0
 ``mcap`` writer keeps every chunk's index entry (about 300 bytes of small Python objects) until the
 file is closed: at 0.1 s that was 36 000 entries an hour, 7.5 MB/h of heap that also pinned the
 allocator's arenas (the resident size of an hour's soak crept 16 MB/h); at 1 s it is 3 600."""
+CHUNK_BYTES: Final = 1 << 18
+"""A chunk also closes at this many uncompressed bytes. Paced in real time a unit sends about 47 kB a
+second, so chunks close on :data:`FLUSH_PERIOD_S`; a replay or ``--pace max`` fills one faster, and
+at 1 MiB one compressed chunk came near 1 MB: what a crash or a full disk loses at once."""
 _MAGIC: Final = b"\x89MCAP0\r\n"
 _BYTES: Final = "application/octet-stream"
 _JSON: Final = "application/json"
 _RECORD_SIZE_LIMIT: Final = 1 << 26
-"""No record footnav writes comes near this (chunks close at 1 MiB); a larger length is corruption."""
+"""No record footnav writes comes near this (chunks close at 256 KiB); a larger length is corruption."""
 EXPECTED: Final = "a footnav capture (.mcap, MCAP profile 'footnav')"
 
 Direction = Literal["rx", "tx"]
@@ -151,7 +155,7 @@ class CaptureWriter:
         self._writer = Writer(
             self._file,
             compression=CompressionType.ZSTD,
-            chunk_size=1 << 20,
+            chunk_size=CHUNK_BYTES,
             index_types=IndexType.CHUNK | IndexType.METADATA,
         )
         self._lock = threading.Lock()
