@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from device.capture import MCAP_MAGIC
 from pipeline.errors import FootnavError
 from pipeline.loaders import CsvMapping, Recording, load_recording
 from pipeline.nav_types import NavBatch
@@ -131,7 +132,7 @@ def _is_capture(path: Path) -> bool:
     """The file starts with MCAP's magic bytes (footnav's captures; ``app.replay`` checks the rest)."""
     try:
         with path.open("rb") as f:
-            return f.read(8) == b"\x89MCAP0\r\n"
+            return f.read(len(MCAP_MAGIC)) == MCAP_MAGIC
     except OSError:
         return False  # the loaders say what is wrong with it
 

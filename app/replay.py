@@ -25,7 +25,7 @@ from app.config import Config, apply_capture_settings
 from app.live import FootRun, dual_nav_config, dual_view_sink, foot_sinks, notice, tof_config
 from app.session import CalibrationLookup, run_unit_session
 from app.status import Progress, StatusLine
-from device.capture import EXPECTED, CaptureReplayLink, summarize_capture
+from device.capture import EXPECTED, MCAP_MAGIC, CaptureReplayLink, summarize_capture
 from device.raw_imu import DUAL_IMU_MASK
 from device.unit import OpenShoeUnit, RawImuMode
 from pipeline.dual_navigator import DualNavigator
@@ -50,7 +50,7 @@ def detect_format(path: Path) -> str:
         raise InputFormatError(f"{path} is a folder; expected {EXPECTED}")
     with open(path, "rb") as f:
         head = f.read(8)
-    if head == b"\x89MCAP0\r\n":
+    if head == MCAP_MAGIC:
         return "footnav-capture"
     if not head:
         raise InputFormatError(f"{path} is an empty file; expected {EXPECTED}")

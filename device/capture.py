@@ -63,7 +63,8 @@ CHUNK_BYTES: Final = 1 << 18
 """A chunk also closes at this many uncompressed bytes. Paced in real time a unit sends about 47 kB a
 second, so chunks close on :data:`FLUSH_PERIOD_S`; a replay or ``--pace max`` fills one faster, and
 at 1 MiB one compressed chunk came near 1 MB: what a crash or a full disk loses at once."""
-_MAGIC: Final = b"\x89MCAP0\r\n"
+MCAP_MAGIC: Final = b"\x89MCAP0\r\n"
+"""The first bytes of every MCAP file."""
 _BYTES: Final = "application/octet-stream"
 _JSON: Final = "application/json"
 _RECORD_SIZE_LIMIT: Final = 1 << 26
@@ -339,10 +340,10 @@ class ReadState:
 def _check_magic(path: Path) -> None:
     try:
         with open(path, "rb") as f:
-            head = f.read(len(_MAGIC))
+            head = f.read(len(MCAP_MAGIC))
     except OSError as exc:
         raise InputFormatError(f"cannot read {path}: {exc.strerror or exc}") from exc
-    if head != _MAGIC:
+    if head != MCAP_MAGIC:
         what = "an empty file" if not head else "not an MCAP file"
         raise InputFormatError(f"{path} is {what}; expected {EXPECTED}")
 
