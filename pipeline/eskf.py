@@ -124,13 +124,16 @@ def _propagate_cov(P: F64, M: F64, R: F64, f_n: F64, dt: float, q_diag: F64) -> 
     """P ← F P Fᵀ + Q in place, F = I + A dt with the blocks of the module docstring.
 
     Only the rows and columns of p, v and θ change, so M = F P is formed for those nine rows
-    (``M`` is (9, 15) scratch), then P = M Fᵀ applies the same row operation to each of those
-    rows of M and is mirrored: about 800 multiply-adds and no allocation.
+    (``M`` is (9, n) scratch), then P = M Fᵀ applies the same row operation to each of those
+    rows of M and is mirrored: about 800 multiply-adds and no allocation. ``P`` is (n, n), n ≥ 15:
+    states after the fifteenth (the floor levels of ``pipeline.tof_aiding``) are constants, F = I
+    and Q = 0 for them (``q_diag`` (n,) is zero there).
     """  # pragma: no cover
+    n = P.shape[0]
     f0, f1, f2 = f_n[0], f_n[1], f_n[2]
     s = -dt
     # M = F P for the rows of p, v, θ (row operations on P)
-    for j in range(N_STATE):
+    for j in range(n):
         a0, a1, a2 = P[TH0, j], P[TH0 + 1, j], P[TH0 + 2, j]
         b0, b1, b2 = P[BA0, j], P[BA0 + 1, j], P[BA0 + 2, j]
         c0, c1, c2 = P[BG0, j], P[BG0 + 1, j], P[BG0 + 2, j]
@@ -154,10 +157,10 @@ def _propagate_cov(P: F64, M: F64, R: F64, f_n: F64, dt: float, q_diag: F64) -> 
         P[i, V0 + 2] = M[i, V0 + 2] + s * (-f1 * a0 + f0 * a1) + s * (R[2, 0] * b0 + R[2, 1] * b1 + R[2, 2] * b2)
         for r in range(3):
             P[i, TH0 + r] = M[i, TH0 + r] + s * (R[r, 0] * c0 + R[r, 1] * c1 + R[r, 2] * c2)
-        for j in range(9, N_STATE):
+        for j in range(9, n):
             P[i, j] = M[i, j]
     # the lower triangle from the upper one: P' is symmetric by construction
-    for i in range(N_STATE):
+    for i in range(n):
         for j in range(min(i, 9)):
             P[i, j] = P[j, i]
         P[i, i] += q_diag[i]
@@ -265,14 +268,16 @@ def _update3_diag(x: F64, P: F64, s0: int, y: F64, r0: float, r1: float, r2: flo
     H = rows s0..s0+2 of the identity. Joseph form, expanded for this H (only rank-3 work):
     (I−KH) P (I−KH)ᵀ + K R Kᵀ = P − K P[s,:] − P[:,s] Kᵀ + K (P[s,s] + R) Kᵀ.
     The error is then injected into the nominal state ``x`` and the covariance reset (Solà §7.2-7.3).
-    ``work`` is (10, 15) scratch.
+    ``P`` is (n, n) and ``x`` (n + 1,): error state i ≥ 15 is nominal x[i + 1] (:func:`inject`).
+    ``work`` is (10, n) scratch.
     """  # pragma: no cover
+    n = P.shape[0]
     s00, s01, s02 = P[s0, s0] + r0, P[s0, s0 + 1], P[s0, s0 + 2]
     s11, s12, s22 = P[s0 + 1, s0 + 1] + r1, P[s0 + 1, s0 + 2], P[s0 + 2, s0 + 2] + r2
     i00, i01, i02, i11, i12, i22 = _inv3_spd(s00, s01, s02, s11, s12, s22)
     y0, y1, y2 = y[0], y[1], y[2]
     # rows of ``work``: 0-2 Kᵀ = S⁻¹ P[s, :], 3-5 (K S)ᵀ, 6-8 P[s, :] (kept: P is overwritten), 9 δx
-    for j in range(N_STATE):
+    for j in range(n):
         h0, h1, h2 = P[s0, j], P[s0 + 1, j], P[s0 + 2, j]
         k0 = h0 * i00 + h1 * i01 + h2 * i02
         k1 = h0 * i01 + h1 * i11 + h2 * i12
@@ -283,26 +288,35 @@ def _update3_diag(x: F64, P: F64, s0: int, y: F64, r0: float, r1: float, r2: flo
         work[5, j] = (k0 * s02 + k1 * s12 + k2 * s22) - h2
         work[6, j], work[7, j], work[8, j] = h0, h1, h2
         work[9, j] = k0 * y0 + k1 * y1 + k2 * y2
-    for i in range(N_STATE):
+    for i in range(n):
         ki0, ki1, ki2 = work[0, i], work[1, i], work[2, i]
         di0, di1, di2 = work[3, i], work[4, i], work[5, i]
-        for j in range(i, N_STATE):
+        for j in range(i, n):
             P[i, j] = (
                 P[i, j]
                 + (di0 * work[0, j] - ki0 * work[6, j])
                 + (di1 * work[1, j] - ki1 * work[7, j])
                 + (di2 * work[2, j] - ki2 * work[8, j])
             )
-    for i in range(N_STATE):
+    for i in range(n):
         for j in range(i):
             P[i, j] = P[j, i]
-    # injection
+    inject(x, P, work[9])
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def inject(x: F64, P: F64, dx: F64) -> None:
+    """Inject the error estimate ``dx`` (n,) into the nominal state ``x`` (n + 1,) and reset ``P``
+    (n, n) (Solà §7.2-7.3): p, v and the biases add, the attitude error rotates the quaternion, and
+    each error state i ≥ 15 (a constant, such as a floor level) adds to x[i + 1]."""  # pragma: no cover
     for r3 in range(3):
-        x[r3] += work[9, P0 + r3]
-        x[3 + r3] += work[9, V0 + r3]
-        x[10 + r3] += work[9, BA0 + r3]
-        x[13 + r3] += work[9, BG0 + r3]
-    inject_attitude_and_reset(x, P, work[9, TH0], work[9, TH0 + 1], work[9, TH0 + 2])
+        x[r3] += dx[P0 + r3]
+        x[3 + r3] += dx[V0 + r3]
+        x[10 + r3] += dx[BA0 + r3]
+        x[13 + r3] += dx[BG0 + r3]
+    for i in range(N_STATE, P.shape[0]):
+        x[i + 1] += dx[i]
+    inject_attitude_and_reset(x, P, dx[TH0], dx[TH0 + 1], dx[TH0 + 2])
 
 
 _POS_YAW = (P0, P0 + 1, P0 + 2, TH0 + 2)  # error-state indices of x, y, z and the heading
@@ -476,7 +490,8 @@ def run_filter(
     """Run the filter over a batch, updating ``x`` (16,) and ``P`` (15, 15) in place.
 
     Args:
-        x, P: nominal state and error covariance, carried between batches.
+        x, P: nominal state and error covariance, carried between batches. With floor levels as
+            states (``pipeline.tof_aiding``) ``x`` is (16 + m,) and ``P`` (15 + m, 15 + m).
         acc_b_mps2, gyr_b_radps: (n, 3) IMU samples; sample k covers the interval ending at it.
         dt_s: (n,) interval before each sample, s. Non-positive intervals skip the propagation
             (duplicated timestamps); intervals of ``par[PAR_DT_MAX]`` or more are counted as gaps
@@ -507,17 +522,20 @@ def run_filter(
         or out_cov.shape[2] != 4
         or par.shape[0] != N_PAR
         or counters.shape[0] != N_CNT
+        or P.shape[0] < N_STATE
+        or P.shape[1] != P.shape[0]
+        or x.shape[0] != P.shape[0] + 1
     ):
         raise ValueError("run_filter: inconsistent array shapes")
     g = par[PAR_G]
-    q_diag = np.zeros(N_STATE)
+    q_diag = np.zeros(P.shape[0])
     r_zaru = par[PAR_ZARU] ** 2
     y = np.empty(3)
     f_n = np.empty(3)
     R0 = np.empty((3, 3))
     R1 = np.empty((3, 3))
-    M = np.empty((9, N_STATE))
-    work = np.empty((10, N_STATE))
+    M = np.empty((9, P.shape[0]))
+    work = np.empty((10, P.shape[0]))
     for k in range(n):
         dt = dt_s[k]
         bad = False

@@ -191,7 +191,7 @@ class Navigator:
     @property
     def state(self) -> F64 | None:
         """Nominal state (16,) [p, v, q_wxyz, b_a, b_g], or None before alignment."""
-        return None if self._x is None else self._x.copy()
+        return None if self._x is None else self._x[:16].copy()
 
     def add_ranges(self, readings: RangeBatch) -> None:
         """Queue ToF readings; each is applied when the IMU samples reach its time (and, with a
@@ -343,6 +343,7 @@ class Navigator:
         returns the floor height under the IMU per sample, the floor height the clearance is measured
         from (``TofAiding.floor_under``) and what became of each reading."""
         assert self._x is not None
+        self._x, self._P = self.tof.augment(self._x, self._P)
         x, P, par, cnt = self._x, self._P, self._par, self._counters
         n = len(batch)
         due = self.tof.take_due(float(batch.t_s[-1]))
@@ -372,6 +373,7 @@ class Navigator:
                     cov[a:b],
                     cnt,
                 )
+                self.tof.sync(x)
                 floor_z[a:b], floor_c[a:b] = self.tof.floor_under(pos[a:b], still[a:b])
                 a = b
             if j < m:

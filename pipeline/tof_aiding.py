@@ -85,6 +85,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline import tof_update as tu
+from pipeline.eskf import N_STATE
 from pipeline.height_detector import HeightDetectorParams
 
 F64 = NDArray[np.float64]
@@ -103,6 +104,10 @@ drifts between two passes over the same edge (about 1 cm RMS on the emulated wal
 
 EDGE_MEMORY = 2000
 """Edges remembered (the most recent)."""
+
+LEVEL_STATES = 16
+"""Floor levels kept as states of the filter (the most recently used; module docstring). An older
+level leaves the state (marginalised: its row and column are dropped) and keeps its last value."""
 
 
 def _unit(v: tuple[float, float, float]) -> tuple[float, float, float]:
@@ -286,13 +291,17 @@ class TofAiding:
         self._res = np.zeros(tu.N_RES)
         self.counts = TofCounts()
         self.levels_z_m: list[float] = [0.0]
+        self._level_state: list[int] = [-1]
+        """Per level, its error-state index in the filter (−1: not a state; the start floor, z = 0 by
+        definition of the frame, never is)."""
+        self._level_used: list[float] = [0.0]
+        self._ref = 0
+        """Index of the reference level (``floor_z_m`` is its height)."""
         self.floor_z_m = 0.0
         self._in_stance = False
         self._stance_obs: list[float] = []
         self._decided = False
         self._stance_t0 = -math.inf
-        self._provisional = False
-        self._stance_z = 0.0
         self._swing_origin: tuple[float, float] | None = None
         self._swing_hits: list[tuple[float, float, float, float]] = []
         self._edges: deque[tuple[float, float, float, float, float, float, float]] = deque(maxlen=EDGE_MEMORY)
@@ -338,9 +347,34 @@ class TofAiding:
 
     # --- one reading ---------------------------------------------------------------------------------
 
-    def _nearest_level(self, z_m: float) -> float | None:
-        best = min(self.levels_z_m, key=lambda lv: abs(lv - z_m))
-        return best if abs(best - z_m) <= self.config.snap_m else None
+    def augment(self, x: F64, P: F64) -> tuple[F64, F64]:
+        """The state ``x`` (16,) and covariance ``P`` (15, 15) with room for the floor levels as states
+        (module docstring): (16 + m,) and (15 + m, 15 + m), m = :data:`LEVEL_STATES`, the new
+        states unused (zero) until a level takes one. Unchanged with ``use`` off or already done."""
+        if not self.config.use or P.shape[0] > N_STATE:
+            return x, P
+        n = N_STATE + LEVEL_STATES
+        x_aug, P_aug = np.zeros(n + 1), np.zeros((n, n))
+        x_aug[: x.shape[0]] = x
+        P_aug[: P.shape[0], : P.shape[1]] = P
+        self._work = np.zeros((2, n))
+        return x_aug, P_aug
+
+    def sync(self, x: F64) -> None:
+        """Read the heights of the levels that are states from ``x`` (the filter corrects them)."""
+        for k, i in enumerate(self._level_state):
+            if i >= 0:
+                self.levels_z_m[k] = float(x[i + 1])
+        self.floor_z_m = self.levels_z_m[self._ref]
+
+    def _nearest_level(self, z_m: float) -> int | None:
+        """Index of the known level nearest ``z_m`` if within ``snap_m``, else None."""
+        k = min(range(len(self.levels_z_m)), key=lambda i: abs(self.levels_z_m[i] - z_m))
+        return k if abs(self.levels_z_m[k] - z_m) <= self.config.snap_m else None
+
+    def _level_height(self, z_m: float) -> float | None:
+        k = self._nearest_level(z_m)
+        return None if k is None else self.levels_z_m[k]
 
     def apply(
         self, x: F64, P: F64, t_s: float, sensor: int, range_m: float, status: int, stance: bool
@@ -349,8 +383,7 @@ class TofAiding:
         innovation)."""
         cfg = self.config
         self.last_hit = None
-        if not stance and self._in_stance and self._provisional:
-            self._finish_level(P)
+        self.sync(x)
         if not stance and self._in_stance:
             self._swing_origin = (float(x[0]), float(x[1]))
         if stance and not self._in_stance:
@@ -368,12 +401,25 @@ class TofAiding:
             self.counts.add(CODE_NAMES[UNKNOWN_SENSOR])
             return UNKNOWN_SENSOR, math.nan, math.nan
         res = self._res
-        deciding = stance and (not self._decided or self._provisional)
+        deciding = stance and not self._decided
         past_edge = not stance and bool(self._past_edge[sensor])
         apply = cfg.use and not deciding and not past_edge and (stance or cfg.update_in_swing)
+        state = self._level_state[self._ref]
         tu.tof_update(
-            x, P, self._lever[sensor], self._dir[sensor], range_m, self.floor_z_m, self._par, apply, self._work, res
+            x,
+            P,
+            self._lever[sensor],
+            self._dir[sensor],
+            range_m,
+            self.floor_z_m,
+            state,
+            self._par,
+            apply,
+            self._work,
+            res,
         )
+        if apply and int(res[tu.RES_CODE]) == tu.USED:
+            self.sync(x)
         code = int(res[tu.RES_CODE])
         height = float(res[tu.RES_H]) if code != tu.NOT_FINITE else math.nan
         innovation = float(res[tu.RES_Y]) if code != tu.NOT_FINITE else math.nan
@@ -389,17 +435,14 @@ class TofAiding:
             code = FLOOR_PENDING
         elif deciding and code != tu.BELOW_FLOOR:
             self._stance_obs.append(floor_obs)
-            self._stance_z = float(x[2])
-            if not self._decided and len(self._stance_obs) >= cfg.decide_readings:
-                self._decide(float(np.median(self._stance_obs)))
-            elif self._provisional:
-                self.levels_z_m[-1] = self.floor_z_m = self._stance_z
+            if len(self._stance_obs) >= cfg.decide_readings:
+                self._decide(float(np.median(self._stance_obs)), x, P)
             code = FLOOR_PENDING
         elif code == tu.USED and not apply:
             code = DISABLED
         # the floor map for the clearance: surfaces seen (snapped to known levels)
         if code in (tu.USED, tu.STEP_EDGE, FLOOR_PENDING, DISABLED):
-            level = self._nearest_level(floor_obs)
+            level = self._level_height(floor_obs)
             hit_x, hit_y = float(res[tu.RES_HIT_X]), float(res[tu.RES_HIT_Y])
             self.last_hit = (hit_x, hit_y, floor_obs if level is None else level, float(level is not None))
             self._hits.append(self.last_hit)
@@ -408,29 +451,52 @@ class TofAiding:
         self.counts.add(CODE_NAMES[code])
         return code, height, innovation
 
-    def _decide(self, z_obs_m: float) -> None:
-        """Set the stance floor from the median floor observation of the stance."""
+    def _decide(self, z_obs_m: float, x: F64, P: F64) -> None:
+        """Set the stance floor from the median floor observation ``z_obs_m`` of the stance: the
+        reference level, a known level, or a new one (module docstring)."""
         self._decided = True
         if abs(z_obs_m - self.floor_z_m) <= self.config.same_floor_m:
+            self._level_used[self._ref] = self._stance_t0
             return
         level = self._nearest_level(z_obs_m)
         if level is None:
-            self._provisional = True
-            level = self._stance_z
-            self.levels_z_m.append(level)
-            self.counts.add("new_floor_levels")
-        self.floor_z_m = level
+            level = self._new_level(x, P)
+        self._ref = level
+        self._level_used[level] = self._stance_t0
+        self.floor_z_m = self.levels_z_m[level]
 
-    def _finish_level(self, P: F64) -> None:
-        """Fix a new level at the end of its first stance and re-anchor the vertical position error
-        to it (module docstring); with ``use`` off only the level is kept (the state is not touched)."""
-        self._provisional = False
-        self.levels_z_m[-1] = self.floor_z_m = self._stance_z
-        if not self.config.use:
-            return
-        P[2, :] = 0.0
-        P[:, 2] = 0.0
-        P[2, 2] = self.config.new_level_sigma_m**2
+    def _new_level(self, x: F64, P: F64) -> int:
+        """A new level where the state puts the IMU now, with the error of the state's height: a clone
+        of δp_z into a level state (module docstring); returns its index. Without level states
+        (``use`` off) only its height is kept."""
+        self.counts.add("new_floor_levels")
+        self.levels_z_m.append(float(x[2]))
+        self._level_used.append(self._stance_t0)
+        self._level_state.append(-1)
+        if P.shape[0] > N_STATE:
+            i = self._free_level_state()
+            self._level_state[-1] = i
+            x[i + 1] = x[2]
+            P[i, :] = P[2, :]
+            P[:, i] = P[:, 2]
+            P[i, i] = P[2, 2] + self.config.new_level_sigma_m**2
+        return len(self.levels_z_m) - 1
+
+    def _free_level_state(self) -> int:
+        """An error-state index for a new level: an unused one, else the one of the level used longest
+        ago (that level leaves the state and keeps its height)."""
+        taken = {i for i in self._level_state if i >= 0}
+        for i in range(N_STATE, N_STATE + LEVEL_STATES):
+            if i not in taken:
+                return i
+        oldest = min(
+            (k for k, i in enumerate(self._level_state) if i >= 0 and k != len(self._level_state) - 1),
+            key=lambda k: self._level_used[k],
+        )
+        i = self._level_state[oldest]
+        self._level_state[oldest] = -1
+        self.counts.add("levels_left_state")
+        return i
 
     def floor_under(self, pos_n_m: F64, stance: NDArray[np.bool_] | None = None) -> tuple[F64, F64]:
         """The floor under IMU positions (n, 3) (module docstring): the tread under each (n,) and the

@@ -17,7 +17,9 @@ With the global attitude error of ``pipeline.eskf`` (R = Exp(δθ) R̂ ≈ (I + 
 
     H = ∂g/∂δx:  δp → (0, 0, 1);  δθ → −e_zᵀ [w]× = (w_y, −w_x, 0);  δv, δb_a, δb_g → 0
 
-(``tests/test_tof_update.py`` checks it against finite differences of g). The noise is the range
+(``tests/test_tof_update.py`` checks it against finite differences of g). When the floor is a state
+of the filter (a floor level of ``pipeline.tof_aiding``, error state ``level``, nominal
+x[level + 1]), z_f is that state and the row has −1 there. The noise is the range
 noise along the vertical plus a floor term, r = (σ_ρ (R̂ u_b)_z)² + σ_f². The update is the scalar
 Joseph form, expanded like ``eskf._update3``: P ← P − K uᵀ − u Kᵀ + K S Kᵀ with u = P Hᵀ, S = H u + r,
 K = u / S; then injection and the covariance reset for the global attitude error (Solà 2017, §7.3).
@@ -37,7 +39,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pipeline.eskf import N_STATE, TH0, inject_attitude_and_reset
+from pipeline.eskf import TH0, inject
 
 F64 = NDArray[np.float64]
 
@@ -54,7 +56,8 @@ N_RES = 7
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
 def height_row(x: F64, lever_b_m: F64, dir_b: F64, range_m: float, H: F64) -> tuple[float, float, float, float]:
-    """Fill H (15,) with the Jacobian row; return (g(x̂) = p_z + w_z, w_x, w_y, (R̂ u_b)_z)."""  # pragma: no cover
+    """Fill H (n,) with the Jacobian row of g (the floor not a state); return (g(x̂) = p_z + w_z, w_x,
+    w_y, (R̂ u_b)_z)."""  # pragma: no cover
     qw, qx, qy, qz = x[6], x[7], x[8], x[9]
     r00 = qw * qw + qx * qx - qy * qy - qz * qz
     r01 = 2.0 * (qx * qy - qw * qz)
@@ -72,7 +75,7 @@ def height_row(x: F64, lever_b_m: F64, dir_b: F64, range_m: float, H: F64) -> tu
     wy = r10 * v0 + r11 * v1 + r12 * v2
     wz = r20 * v0 + r21 * v1 + r22 * v2
     uz = r20 * dir_b[0] + r21 * dir_b[1] + r22 * dir_b[2]
-    for i in range(N_STATE):
+    for i in range(H.shape[0]):
         H[i] = 0.0
     H[2] = 1.0
     H[TH0] = wy
@@ -88,14 +91,18 @@ def tof_update(
     dir_b: F64,
     range_m: float,
     floor_z_m: float,
+    level: int,
     par: F64,
     apply: bool,
     work: F64,
     res: F64,
 ) -> None:
     """Gate one range reading against the floor at ``floor_z_m`` and, if it passes and ``apply``,
-    update ``x`` (16,) and ``P`` (15, 15) in place. ``work`` is (2, 15) scratch; ``res`` (N_RES,)
-    receives the result (see the RES_* indices; RES_CODE one of the result codes)."""  # pragma: no cover
+    update ``x`` (n + 1,) and ``P`` (n, n) in place. ``level``: the error-state index of that floor
+    when it is a state (``floor_z_m`` is then x[level + 1]), else −1. ``work`` is (2, n) scratch;
+    ``res`` (N_RES,) receives the result (see the RES_* indices; RES_CODE one of the result
+    codes)."""  # pragma: no cover
+    n = P.shape[0]
     H = work[0]
     u = work[1]
     res[RES_CODE] = NOT_FINITE
@@ -110,9 +117,15 @@ def tof_update(
     y = floor_z_m - g
     res[RES_Y] = y
     r = (par[PAR_SIGMA_RANGE] * uz) ** 2 + par[PAR_SIGMA_FLOOR] ** 2
-    for i in range(N_STATE):
+    for i in range(n):
         u[i] = P[i, 2] + P[i, TH0] * H[TH0] + P[i, TH0 + 1] * H[TH0 + 1]
+    if level >= 0:
+        H[level] = -1.0
+        for i in range(n):
+            u[i] -= P[i, level]
     s = u[2] + H[TH0] * u[TH0] + H[TH0 + 1] * u[TH0 + 1] + r
+    if level >= 0:
+        s -= u[level]
     res[RES_S] = s
     if res[RES_H] < -par[PAR_BELOW]:
         res[RES_CODE] = BELOW_FLOOR
@@ -127,18 +140,14 @@ def tof_update(
     if not apply:
         return
     # Joseph form, expanded for a scalar measurement: P − K uᵀ − u Kᵀ + K S Kᵀ, K = u / S
-    for i in range(N_STATE):
+    for i in range(n):
         ki = u[i] / s
-        for j in range(i, N_STATE):
+        for j in range(i, n):
             kj = u[j] / s
             P[i, j] = P[i, j] - ki * u[j] - u[i] * kj + ki * s * kj
-    for i in range(N_STATE):
+    for i in range(n):
         for j in range(i):
             P[i, j] = P[j, i]
-    # injection
-    for r3 in range(3):
-        x[r3] += u[r3] / s * y
-        x[3 + r3] += u[3 + r3] / s * y
-        x[10 + r3] += u[9 + r3] / s * y
-        x[13 + r3] += u[12 + r3] / s * y
-    inject_attitude_and_reset(x, P, u[TH0] / s * y, u[TH0 + 1] / s * y, u[TH0 + 2] / s * y)
+    for i in range(n):
+        H[i] = u[i] / s * y  # H is no longer needed: it holds δx = K y
+    inject(x, P, H)

@@ -66,34 +66,45 @@ def _par(gate: float = 1e9, step: float = 1e9, below: float = 1e9) -> np.ndarray
     return par
 
 
-def test_update_equals_the_full_matrix_joseph_form() -> None:
+@pytest.mark.parametrize("levels", [0, 2])
+def test_update_equals_the_full_matrix_joseph_form(levels: int) -> None:
+    """With the floor a constant, and with it a state (the second of two floor-level states: H has
+    −1 there and the update corrects the level too)."""
     rng = np.random.default_rng(7)
-    x = _state(rng)
-    A = rng.normal(0.0, 0.05, (N_STATE, N_STATE))
-    P = A @ A.T + np.eye(N_STATE) * 1e-4
-    lever, direction, rho, floor = np.array([0.12, 0.0, 0.03]), np.array([0.1, 0.0, -1.0]), 0.2, -0.05
+    n = N_STATE + levels
+    x = np.concatenate([_state(rng), rng.normal(0.3, 0.1, levels)])
+    A = rng.normal(0.0, 0.05, (n, n))
+    P = A @ A.T + np.eye(n) * 1e-4
+    lever, direction, rho = np.array([0.12, 0.0, 0.03]), np.array([0.1, 0.0, -1.0]), 0.2
     direction /= np.linalg.norm(direction)
-    H = np.zeros(N_STATE)
+    level = n - 1 if levels else -1
+    floor = float(x[level + 1]) if levels else -0.05
+    H = np.zeros(n)
     g, _, _, uz = tu.height_row(x, lever, direction, rho, H)
+    if levels:
+        H[level] = -1.0
     r = (0.01 * uz) ** 2 + 0.003**2
     S = H @ P @ H + r
     K = P @ H / S
     y = floor - g
-    I_KH = np.eye(N_STATE) - np.outer(K, H)
+    I_KH = np.eye(n) - np.outer(K, H)
     P_joseph = I_KH @ P @ I_KH.T + r * np.outer(K, K)
     dx = K * y
     x1, P1, res = x.copy(), P.copy(), np.zeros(tu.N_RES)
-    tu.tof_update(x1, P1, lever, direction, rho, floor, _par(), True, np.zeros((2, N_STATE)), res)
+    tu.tof_update(x1, P1, lever, direction, rho, floor, level, _par(), True, np.zeros((2, n)), res)
     assert res[tu.RES_CODE] == tu.USED
     assert res[tu.RES_Y] == pytest.approx(y)
     np.testing.assert_allclose(x1, _inject(x, dx), atol=1e-12)
     # the reset G P Gᵀ changes P by O(δθ) in the attitude block only
-    G = np.eye(N_STATE)
+    G = np.eye(n)
     h = 0.5 * dx[6:9]
     G[6:9, 6:9] += np.array([[0, -h[2], h[1]], [h[2], 0, -h[0]], [-h[1], h[0], 0]])
     np.testing.assert_allclose(P1, G @ P_joseph @ G.T, atol=1e-12)
-    # and the measurement now agrees better with the floor
-    assert abs(floor - _g(x1, lever, direction, rho)) < abs(y)
+    # and the measurement now agrees better with the floor (the corrected one when it is a state)
+    floor1 = float(x1[level + 1]) if levels else floor
+    assert abs(floor1 - _g(x1, lever, direction, rho)) < abs(y)
+    if levels:
+        assert x1[level + 1] != x[level + 1]  # the level observed is corrected
 
 
 def test_gate_reasons() -> None:
@@ -106,7 +117,7 @@ def test_gate_reasons() -> None:
 
     def code(rho: float, floor: float = 0.0) -> int:
         x1, P1 = x.copy(), P.copy()
-        tu.tof_update(x1, P1, lever, down, rho, floor, par, True, work, res)
+        tu.tof_update(x1, P1, lever, down, rho, floor, -1, par, True, work, res)
         if res[tu.RES_CODE] != tu.USED:  # rejected readings change nothing
             np.testing.assert_array_equal(x1, x)
             np.testing.assert_array_equal(P1, P)
