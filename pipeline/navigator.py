@@ -343,7 +343,6 @@ class Navigator:
         returns the floor height under the IMU per sample, the floor height the clearance is measured
         from (``TofAiding.floor_under``) and what became of each reading."""
         assert self._x is not None
-        self._x, self._P = self.tof.augment(self._x, self._P)
         x, P, par, cnt = self._x, self._P, self._par, self._counters
         n = len(batch)
         due = self.tof.take_due(float(batch.t_s[-1]))
@@ -377,6 +376,7 @@ class Navigator:
                 floor_z[a:b], floor_c[a:b] = self.tof.floor_under(pos[a:b], still[a:b])
                 a = b
             if j < m:
+                x, P = self._x, self._P = self.tof.reserve(x, P)
                 stance = bool(still[max(a - 1, 0)])
                 codes[j], heights[j], innov[j] = self.tof.apply(
                     x, P, float(due.t_s[j]), int(due.sensor[j]), float(due.range_m[j]), int(due.status[j]), stance

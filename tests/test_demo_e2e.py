@@ -111,7 +111,7 @@ def test_realtime_pace_and_interrupt(tmp_path: Path) -> None:
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err
-    assert "Traceback" not in err and "interrupted" in err
+    assert "Traceback" not in err and "interrupted" in err, err
     store = RrdReader(path).stream().collect()
     n = store.reader(index="imu_time", contents=["/plots/stance/foot"]).to_arrow_table().num_rows
     walked_s = time.monotonic() - started + 5  # generous: data flowing before `started`
