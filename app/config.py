@@ -20,6 +20,11 @@ The file (TOML, read with :mod:`tomllib`)::
     threshold = 25.0
     window_s = 0.01
 
+    [tof]                       # the ToF sensors' mounting and noise (pipeline.tof_aiding.TofConfig)
+    lever_b_m = [[0.12, 0.0, 0.03], [0.0, -0.045, 0.03], [-0.10, 0.0, 0.04]]  # from the IMU, m
+    dir_b = [[0.17, 0.0, -1.0], [0.0, 0.0, -1.0], [-0.17, 0.0, -1.0]]         # viewing directions
+    sigma_range_m = 0.01
+
     [calibration]
     dir = ""                    # calibration files (default: $FOOTNAV_CALIBRATION_DIR, else
                                 # $XDG_CONFIG_HOME/footnav/calibration, else ~/.config/footnav/calibration)
@@ -30,22 +35,28 @@ The file (TOML, read with :mod:`tomllib`)::
     gyr_bias_init_radps = 0.003
 
 Keys map one to one onto the dataclass fields named above, with the same meaning and units; an
-unknown key or a wrong type is an error naming the file, the key and what is allowed.
+unknown key or a wrong type is an error naming the file, the key and what is allowed. ``[tof]``
+describes the unit's hardware (where each range sensor sits and looks, in body axes, and its noise);
+the floor-reference and gating constants of ``TofConfig`` are the algorithm's, not settings. A
+capture records the [tof] values in force, and its replay uses them.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from device.capture import FLUSH_PERIOD_S
 from pipeline.errors import FootnavError
+from pipeline.height_detector import HEIGHT_MODES, HeightDetectorParams, HeightMode
 from pipeline.navigator import NavConfig
 from pipeline.profiles import PROFILES, UnitProfile
+from pipeline.tof_aiding import TofConfig
 
 DEFAULT_FILE = "footnav.toml"
 DEFAULT_SESSIONS_DIR = "sessions"
@@ -65,6 +76,9 @@ _DETECTOR_CLS = type(NavConfig().detector)
 """The detector settings dataclass of ``NavConfig.detector`` (pipeline.detectors)."""
 _DETECTOR_FIELDS = {f.name: f for f in dataclasses.fields(_DETECTOR_CLS)}
 _PROFILE_FIELDS = {f.name: f for f in dataclasses.fields(UnitProfile) if f.name != "name"}
+_TOF_KEYS = ("lever_b_m", "dir_b", "sigma_range_m", "sigma_floor_m")
+"""The ``TofConfig`` fields of the [tof] section (module docstring)."""
+_SECTIONS = ("session", "unit", "calibration", "filter", "detector", "tof")
 
 
 class ConfigError(FootnavError):
@@ -121,6 +135,23 @@ class Config:
             **{k: self[f"filter.{k}"] for k in _FILTER_FIELDS},
         )
 
+    def tof_config(self, stance: str = "inertial") -> TofConfig:
+        """The ToF aiding settings: the [tof] section, with the stance detector mode ``stance``
+        (inertial, height, and, or; ``pipeline.height_detector``)."""
+        if stance not in HEIGHT_MODES:
+            raise ConfigError(f"unknown stance detector {stance!r}; expected one of {', '.join(HEIGHT_MODES)}")
+        levers, dirs = self["tof.lever_b_m"], self["tof.dir_b"]
+        if len(levers) != len(dirs):
+            raise ConfigError(
+                f"[tof] has {len(levers)} lever arms ({self.source('tof.lever_b_m')}) but {len(dirs)} viewing "
+                f"directions ({self.source('tof.dir_b')}): one of each per sensor"
+            )
+        if any(math.hypot(*d) == 0.0 for d in dirs):
+            raise ConfigError(f"[tof] dir_b ({self.source('tof.dir_b')}): a viewing direction is zero")
+        return TofConfig(
+            **{k: self[f"tof.{k}"] for k in _TOF_KEYS}, detector=HeightDetectorParams(mode=cast(HeightMode, stance))
+        )
+
     def set(self, key: str, value: Any, source: str) -> None:
         """Override one value (``None`` leaves it alone)."""
         if value is None:
@@ -155,10 +186,18 @@ class Config:
             "profile": dataclasses.asdict(nav.profile),
             "detector": dataclasses.asdict(nav.detector),
             "filter": {k: getattr(nav, k) for k in _FILTER_FIELDS},
+            "tof": {k: _json(self[f"tof.{k}"]) for k in _TOF_KEYS},
         }
 
 
+def _json(value: Any) -> Any:
+    """Tuples (the sensors' vectors) as JSON lists."""
+    return [_json(v) for v in value] if isinstance(value, tuple) else value
+
+
 def _toml(value: Any) -> str:
+    if isinstance(value, tuple):
+        return "[" + ", ".join(_toml(v) for v in value) + "]"
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
@@ -167,7 +206,18 @@ def _toml(value: Any) -> str:
 
 
 def _coerce(key: str, value: Any, default: Any, source: str) -> Any:
-    """Check ``value`` against the type of the default; ints are fine where floats are expected."""
+    """Check ``value`` against the type of the default; ints are fine where floats are expected; a
+    tuple of 3-vectors (the ToF sensors' lever arms or directions) is a non-empty list of [x, y, z]."""
+    if isinstance(default, tuple):
+        vectors = value if isinstance(value, list | tuple) else None
+        if not vectors or not all(
+            isinstance(v, list | tuple)
+            and len(v) == 3
+            and all(isinstance(c, int | float) and not isinstance(c, bool) and math.isfinite(c) for c in v)
+            for v in vectors
+        ):
+            raise ConfigError(f"{source}: {key} must be a list of [x, y, z] vectors (one per sensor), got {value!r}")
+        return tuple(tuple(float(c) for c in v) for v in vectors)
     if isinstance(default, bool):
         ok = isinstance(value, bool)
     elif isinstance(default, int):
@@ -196,12 +246,15 @@ def defaults() -> Config:
         values[f"filter.{k}"] = Setting(getattr(nav, k), DEFAULT)
     for k in _DETECTOR_FIELDS:
         values[f"detector.{k}"] = Setting(getattr(nav.detector, k), DEFAULT)
+    tof = TofConfig()
+    for k in _TOF_KEYS:
+        values[f"tof.{k}"] = Setting(getattr(tof, k), DEFAULT)
     profiles = {name: (p, "built-in") for name, p in PROFILES.items()}
     return Config(values, profiles)
 
 
 def _apply_table(cfg: Config, data: dict[str, Any], source: str, where: str) -> None:
-    for section in ("session", "unit", "calibration", "filter", "detector"):
+    for section in _SECTIONS:
         table = data.get(section, {})
         if not isinstance(table, dict):
             raise ConfigError(f"{where}: [{section}] must be a table")
@@ -234,11 +287,10 @@ def _apply_table(cfg: Config, data: dict[str, Any], source: str, where: str) -> 
                 )
             changes[key] = _coerce(f"profiles.{name}.{key}", value, getattr(base, key), where)
         cfg.profiles[name] = (dataclasses.replace(base, **changes), f"{source} [profiles.{name}], base {base_name}")
-    unknown = set(data) - {"session", "unit", "calibration", "filter", "detector", "profiles"}
+    unknown = set(data) - {*_SECTIONS, "profiles"}
     if unknown:
         raise ConfigError(
-            f"{where}: unknown section(s) {', '.join(sorted(unknown))}; "
-            "known: session, unit, calibration, filter, detector, profiles"
+            f"{where}: unknown section(s) {', '.join(sorted(unknown))}; known: {', '.join(_SECTIONS)}, profiles"
         )
 
 
@@ -259,6 +311,7 @@ def load_config(path: Path | None = None, *, cwd: Path | None = None) -> Config:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{file} is not valid TOML: {exc}") from exc
     _apply_table(cfg, data, f"file {file}", str(file))
+    cfg.tof_config()  # one lever arm per viewing direction, none of them zero
     cfg.file = file
     return cfg
 
@@ -276,7 +329,7 @@ def apply_capture_settings(cfg: Config, nav_json: dict[str, Any], source: str) -
             if name not in cfg.profiles or cfg.profiles[name][0] != up:
                 cfg.profiles[name] = (up, source)
             cfg.set("unit.profile", name, source)
-    for section in ("filter", "detector"):
+    for section in ("filter", "detector", "tof"):
         table = nav_json.get(section, {})
         if isinstance(table, dict):
             for key, value in table.items():

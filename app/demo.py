@@ -41,7 +41,6 @@ from app.live import (
     notice,
     open_capture,
     run_feet,
-    tof_config,
     unit_header,
 )
 from app.session import SerialSessionResult, UnitAddress, run_device_session
@@ -53,7 +52,7 @@ from device.emulator.icosahedron import MISCALIBRATED_MCU_ID, miscalibrated_sign
 from device.emulator.imu_errors import IMU_GRADES, corrupt
 from device.emulator.pty_server import PtyShoeServer
 from device.emulator.scripts import BaroScript, TofScript, baro_from_height
-from device.emulator.tof_sensors import TofSensorModel, tof_readings
+from device.emulator.tof_sensors import TofMount, TofSensorModel, tof_readings
 from device.raw_imu import DUAL_IMU_MASK
 from device.unit import RawImuMode
 from pipeline.dual_imu_lever import check_lever_arm
@@ -61,6 +60,7 @@ from pipeline.dual_navigator import DualNavigator
 from pipeline.navigator import Navigator
 from pipeline.profiles import get_profile
 from pipeline.runner import NavSink
+from pipeline.tof_aiding import TofConfig
 from views.outputs import open_session_views
 
 PATHS = ("rectangle", "line", "figure8", "stairs")
@@ -188,11 +188,20 @@ def dual_demo_truth(opts: DemoOptions) -> tuple[GaitTruth, NDArray[np.float64], 
     return truth, acc, gyr
 
 
-def demo_extensions(opts: DemoOptions, truth: GaitTruth, foot_index: int) -> tuple[TofScript | None, BaroScript | None]:
-    """The ToF and barometer readings of one emulated foot (none unless ``opts.tof``)."""
+def demo_extensions(
+    opts: DemoOptions, truth: GaitTruth, foot_index: int, mounting: TofConfig | None = None
+) -> tuple[TofScript | None, BaroScript | None]:
+    """The ToF and barometer readings of one emulated foot (none unless ``opts.tof``), its sensors
+    mounted as ``mounting`` says (the [tof] configuration; default: ``TofConfig()``)."""
     if not opts.tof:
         return None, None
-    sensors = TofSensorModel(seed=opts.seed + foot_index)
+    m = mounting or TofConfig()
+    mounts = tuple(
+        TofMount(lever, (d[0] / norm, d[1] / norm, d[2] / norm))
+        for lever, d in zip(m.lever_b_m, m.dir_b, strict=True)
+        for norm in [math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)]
+    )
+    sensors = TofSensorModel(mounts=mounts, sigma_m=m.sigma_range_m, seed=opts.seed + foot_index)
     tof = tof_readings(truth.t_s, truth.pos_n_m, truth.quat_nb_wxyz, floor_of(opts.path), sensors)
     return tof, baro_from_height(truth.t_s, truth.pos_n_m[:, 2])
 
@@ -256,7 +265,7 @@ def run_demo(opts: DemoOptions) -> int:
         ]
     else:
         mcu_id = MISCALIBRATED_MCU_ID if opts.miscalibrated else None
-        ext = [demo_extensions(opts, t, k) for k, (t, _, _) in enumerate(truths)]
+        ext = [demo_extensions(opts, t, k, cfg.tof_config(opts.stance)) for k, (t, _, _) in enumerate(truths)]
         servers = [
             PtyShoeServer(t.t_s, acc, gyr, speed=opts.realtime, record=False, mcu_id=mcu_id, tof=tof, baro=baro)
             for (t, acc, gyr), (tof, baro) in zip(truths, ext, strict=True)
@@ -273,7 +282,7 @@ def run_demo(opts: DemoOptions) -> int:
             server.port,
             DualNavigator(dual_config, rate_hz=truth.rate_hz)
             if opts.dual_imu
-            else Navigator(nav_config, rate_hz=truth.rate_hz, tof=tof_config(opts.stance)),
+            else Navigator(nav_config, rate_hz=truth.rate_hz, tof=cfg.tof_config(opts.stance)),
         )
         for foot, server in zip(feet, servers, strict=True)
     ]

@@ -21,7 +21,7 @@ from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -37,11 +37,9 @@ from device.unit import OpenShoeUnit, RawImuMode
 from pipeline.dual_imu_eskf import DualEskfConfig
 from pipeline.dual_navigator import DualNavConfig, DualNavigator
 from pipeline.errors import DeviceError, FootnavError
-from pipeline.height_detector import HEIGHT_MODES, HeightDetectorParams, HeightMode
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavConfig, Navigator
 from pipeline.runner import NavSink
-from pipeline.tof_aiding import TofConfig
 from views.dual_imu import DualRunView
 from views.outputs import SessionViews, open_session_views
 
@@ -136,13 +134,6 @@ def unit_header(
             "profile": config["unit.profile"],
         },
     )
-
-
-def tof_config(stance: str) -> TofConfig:
-    """ToF aiding settings with the stance detector mode ``stance`` (inertial, height, and, or)."""
-    if stance not in HEIGHT_MODES:
-        raise ValueError(f"unknown stance detector {stance!r}; expected one of {', '.join(HEIGHT_MODES)}")
-    return TofConfig(detector=HeightDetectorParams(mode=cast(HeightMode, stance)))
 
 
 @dataclass
@@ -440,7 +431,7 @@ async def live_session(opts: LiveOptions) -> int:
         rate_hz = BASE_RATE_HZ / 2 ** dividers[foot]
         if dual is not None:
             return DualNavigator(dual_nav_config(nav_config, dual), rate_hz=rate_hz)
-        return Navigator(nav_config, rate_hz=rate_hz, tof=tof_config(opts.stance))
+        return Navigator(nav_config, rate_hz=rate_hz, tof=cfg.tof_config(opts.stance))
 
     runs = [FootRun(foot, str(addresses[foot]), navigator(foot), rate_divider_log2=dividers[foot]) for foot in feet]
     for run in runs:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from app.calibration_store import StoredCalibration, calibration_dir, load_calibration
 from app.config import Config, apply_capture_settings
-from app.live import FootRun, dual_nav_config, dual_view_sink, foot_sinks, notice, tof_config
+from app.live import FootRun, dual_nav_config, dual_view_sink, foot_sinks, notice
 from app.session import CalibrationLookup, run_unit_session
 from app.status import Progress, StatusLine
 from device.capture import EXPECTED, MCAP_MAGIC, CaptureReplayLink, summarize_capture
@@ -166,7 +166,7 @@ def run_replay(opts: ReplayOptions) -> int:
             lever = lever_of[foot]
             navigator = DualNavigator(dual_nav_config(nav_config, (lever[0], lever[1], lever[2])), rate_hz=rate_hz)
         else:
-            navigator = Navigator(nav_config, rate_hz=rate_hz, tof=tof_config(opts.stance or str(recorded)))
+            navigator = Navigator(nav_config, rate_hz=rate_hz, tof=cfg.tof_config(opts.stance or str(recorded)))
         run = FootRun(foot, opts.path.name, navigator)
         foot_sinks(run, views, status, two_feet=len(feet) > 1, put_timeout_s=0.0 if realtime else REPLAY_PUT_TIMEOUT_S)
         if views is not None and isinstance(navigator, DualNavigator):

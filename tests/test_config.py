@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -9,9 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from app.config import CLI, ConfigError, load_config
+from app.config import CLI, ConfigError, apply_capture_settings, defaults, load_config
 from pipeline.navigator import NavConfig
 from pipeline.profiles import PROFILES
+from pipeline.tof_aiding import TofConfig
 
 TOML = """
 [session]
@@ -29,6 +31,10 @@ threshold = 30
 [profiles.myshoe]
 base = "adis16367"
 gyr_bias_init_radps = 0.003
+
+[tof]
+lever_b_m = [[0.15, 0.0, 0.02], [-0.08, -0.03, 0.03]]
+dir_b = [[0.2, 0, -1], [0, 0, -1]]
 """
 
 
@@ -48,6 +54,21 @@ def test_file_and_command_line_override_defaults_with_sources(tmp_path: Path) ->
     assert load_config(cwd=tmp_path / "nowhere").source("filter.align_s") == "default"
 
 
+def test_tof_mounting_from_the_file_and_through_a_capture_header(tmp_path: Path) -> None:
+    (tmp_path / "footnav.toml").write_text(TOML)
+    cfg = load_config(cwd=tmp_path)
+    tof = cfg.tof_config("and")
+    assert tof.lever_b_m == ((0.15, 0.0, 0.02), (-0.08, -0.03, 0.03)) and tof.dir_b[0] == (0.2, 0.0, -1.0)
+    assert tof.detector.mode == "and" and tof.sigma_range_m == TofConfig().sigma_range_m
+    assert cfg.source("tof.dir_b").startswith("file ") and cfg.source("tof.sigma_range_m") == "default"
+    # what a capture header records is what its replay navigates with
+    replay = defaults()
+    apply_capture_settings(replay, json.loads(json.dumps(cfg.to_json())), "capture x.mcap")
+    assert replay.tof_config() == cfg.tof_config() and replay.source("tof.lever_b_m") == "capture x.mcap"
+    with pytest.raises(ConfigError, match="unknown stance detector 'both'"):
+        cfg.tof_config("both")
+
+
 @pytest.mark.parametrize(
     ("text", "needle"),
     [
@@ -56,6 +77,9 @@ def test_file_and_command_line_override_defaults_with_sources(tmp_path: Path) ->
         ("[profiles.x]\nbase = 'nope'\n", "base 'nope' is not a known profile"),
         ("[viewer]\nx = 1\n", "unknown section"),
         ("[filter\n", "not valid TOML"),
+        ("[tof]\nlever_b_m = [[0.1, 0.0]]\n", "tof.lever_b_m must be a list of [x, y, z] vectors"),
+        ("[tof]\nlever_b_m = [[0.1, 0.0, 0.0]]\n", "[tof] has 1 lever arms"),
+        ("[tof]\ndir_b = [[0, 0, 0], [0, 0, -1], [0, 0, -1]]\n", "a viewing direction is zero"),
     ],
 )
 def test_bad_files_say_what_is_wrong(tmp_path: Path, text: str, needle: str) -> None:
@@ -75,7 +99,9 @@ def test_config_command_shows_values_and_sources(tmp_path: Path) -> None:
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     out = proc.stdout
-    assert "[filter]" in out and "[detector]" in out and "[profiles.myshoe]" in out
+    assert "[filter]" in out and "[detector]" in out and "[profiles.myshoe]" in out and "[tof]" in out
+    line = next(x for x in out.splitlines() if x.startswith("lever_b_m = "))
+    assert "[[0.15, 0.0, 0.02], [-0.08, -0.03, 0.03]]" in line and "file " in line  # as TOML
     line = next(x for x in out.splitlines() if x.startswith("align_s = "))
     assert "0.8" in line and "file " in line
     line = next(x for x in out.splitlines() if x.startswith("rate_divider = "))

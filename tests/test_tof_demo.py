@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.config import defaults
+from app.config import defaults, load_config
 from app.demo import DemoOptions, demo_truth, run_demo
 from app.export import CLEARANCE_COLUMNS, EXPORT_COLUMNS, run_export
 from app.replay import ReplayOptions, run_replay
@@ -94,3 +94,28 @@ def test_demo_with_tof_sensors_live_and_replayed(tmp_path: Path) -> None:
     z_err_tof = np.abs(live.pos_n_m[:, 2] - truth.pos_n_m[idx, 2])
     z_err_ins = np.abs(inertial.pos_n_m[:, 2] - truth.pos_n_m[idx, 2])
     assert z_err_tof[-1000:].mean() < 0.2 * z_err_ins[-1000:].mean()
+
+
+def test_a_unit_mounted_otherwise_is_configured_in_the_tof_section(tmp_path: Path) -> None:
+    """Two sensors where the [tof] section puts them (the emulated unit mounted the same way): fused
+    live with that mounting, recorded in the capture, and replayed with it by a default configuration."""
+    (tmp_path / "footnav.toml").write_text(
+        "[tof]\nlever_b_m = [[0.18, 0.0, 0.06], [-0.10, 0.03, 0.08]]\ndir_b = [[0.0, 0.0, -1.0], [0.0, 0.3, -1.0]]\n"
+    )
+    cfg = load_config(cwd=tmp_path)
+    cfg.set("session.sessions_dir", str(tmp_path), "test")
+    got, make = _collector()
+    opts = DemoOptions(
+        path="line", duration_s=15.0, viewer=False, realtime=math.inf, config=cfg, collect=make, tof=True
+    )
+    assert run_demo(opts) == 0
+    live = concat_batches(got["foot"])
+    assert live.ranges is not None and set(live.ranges.sensor.tolist()) == {0, 1}
+    truth, _, _ = demo_truth(opts, 0)
+    idx = np.rint(live.t_s * 1000).astype(int)
+    true_clearance = truth.pos_n_m[idx, 2] - truth.floor_z_m[idx]
+    assert np.sqrt(np.mean((live.clearance_m - true_clearance) ** 2)) < 0.01
+    (path,) = tmp_path.glob("*.mcap")
+    got_r, make_r = _collector()
+    assert run_replay(ReplayOptions(path=path, config=defaults(), viewer=False, collect=make_r)) == 0
+    np.testing.assert_array_equal(concat_batches(got_r["foot"]).pos_n_m, live.pos_n_m)
