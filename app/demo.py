@@ -196,11 +196,8 @@ def demo_extensions(
     if not opts.tof:
         return None, None
     m = mounting or TofConfig()
-    mounts = tuple(
-        TofMount(lever, (d[0] / norm, d[1] / norm, d[2] / norm))
-        for lever, d in zip(m.lever_b_m, m.dir_b, strict=True)
-        for norm in [math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)]
-    )
+    dirs = np.asarray(m.dir_b) / np.linalg.norm(m.dir_b, axis=1, keepdims=True)
+    mounts = tuple(TofMount(lever, (d[0], d[1], d[2])) for lever, d in zip(m.lever_b_m, dirs.tolist(), strict=True))
     sensors = TofSensorModel(mounts=mounts, sigma_m=m.sigma_range_m, seed=opts.seed + foot_index)
     tof = tof_readings(truth.t_s, truth.pos_n_m, truth.quat_nb_wxyz, floor_of(opts.path), sensors)
     return tof, baro_from_height(truth.t_s, truth.pos_n_m[:, 2])
