@@ -30,6 +30,21 @@ def _collector() -> tuple[dict[str, list[NavBatch]], Callable[[str], Callable[[N
     return got, make
 
 
+def _clearance_rms_m(opts: DemoOptions, live: NavBatch) -> float:
+    """Live clearance against the truth of the same samples (one sample per ms since the first)."""
+    truth, _, _ = demo_truth(opts, 0)
+    idx = np.rint(live.t_s * 1000).astype(int)
+    true_clearance = truth.pos_n_m[idx, 2] - truth.floor_z_m[idx]
+    return float(np.sqrt(np.mean((live.clearance_m - true_clearance) ** 2)))
+
+
+def _replayed(path: Path) -> NavBatch:
+    """The capture replayed with a default configuration (the capture's own settings apply)."""
+    got, make = _collector()
+    assert run_replay(ReplayOptions(path=path, config=defaults(), viewer=False, collect=make)) == 0
+    return concat_batches(got["foot"])
+
+
 def test_demo_with_tof_sensors_live_and_replayed(tmp_path: Path) -> None:
     cfg = defaults()
     cfg.set("session.sessions_dir", str(tmp_path), "test")
@@ -55,16 +70,12 @@ def test_demo_with_tof_sensors_live_and_replayed(tmp_path: Path) -> None:
     assert t_first < 5.0
     assert len(live.ranges) > 0.95 * (25.0 - t_first) * 100
     assert np.mean(live.ranges.code == 0) > 0.7
-    # clearance against the truth of the same samples (one sample per ms since the first)
+    assert _clearance_rms_m(opts, live) < 0.01
     truth, _, _ = demo_truth(opts, 0)
     idx = np.rint(live.t_s * 1000).astype(int)
-    true_clearance = truth.pos_n_m[idx, 2] - truth.floor_z_m[idx]
-    assert np.sqrt(np.mean((live.clearance_m - true_clearance) ** 2)) < 0.01
 
     (path,) = tmp_path.glob("*.mcap")
-    got_r, make_r = _collector()
-    assert run_replay(ReplayOptions(path=path, config=defaults(), viewer=False, collect=make_r)) == 0
-    replayed = concat_batches(got_r["foot"])
+    replayed = _replayed(path)
     # bit for bit, ToF updates and the recorded stance detector ("and") included
     np.testing.assert_array_equal(replayed.pos_n_m, live.pos_n_m)
     np.testing.assert_array_equal(replayed.stance, live.stance)
@@ -111,11 +122,6 @@ def test_a_unit_mounted_otherwise_is_configured_in_the_tof_section(tmp_path: Pat
     assert run_demo(opts) == 0
     live = concat_batches(got["foot"])
     assert live.ranges is not None and set(live.ranges.sensor.tolist()) == {0, 1}
-    truth, _, _ = demo_truth(opts, 0)
-    idx = np.rint(live.t_s * 1000).astype(int)
-    true_clearance = truth.pos_n_m[idx, 2] - truth.floor_z_m[idx]
-    assert np.sqrt(np.mean((live.clearance_m - true_clearance) ** 2)) < 0.01
+    assert _clearance_rms_m(opts, live) < 0.01  # 3.5 cm navigated with the default mounting
     (path,) = tmp_path.glob("*.mcap")
-    got_r, make_r = _collector()
-    assert run_replay(ReplayOptions(path=path, config=defaults(), viewer=False, collect=make_r)) == 0
-    np.testing.assert_array_equal(concat_batches(got_r["foot"]).pos_n_m, live.pos_n_m)
+    np.testing.assert_array_equal(_replayed(path).pos_n_m, live.pos_n_m)
