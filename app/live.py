@@ -71,11 +71,17 @@ def new_session_id(kind: str, now: datetime | None = None) -> str:
 
 
 def offset_sink(sink: NavSink, offset_m: Sequence[float]) -> NavSink:
-    """``sink`` fed with positions shifted by ``offset_m`` (display only)."""
+    """``sink`` fed with positions shifted by ``offset_m`` (display only): the IMU's, and with them the
+    ToF readings' floor hits and the floor height under the IMU, so the views' floor lookups (the
+    whole-swing clearance) see hits and track in one frame."""
     off = np.asarray(offset_m, dtype=np.float64)
 
     def shifted(nav: NavBatch) -> object:
-        return sink(dataclasses.replace(nav, pos_n_m=nav.pos_n_m + off))
+        ranges = nav.ranges
+        if ranges is not None:
+            ranges = dataclasses.replace(ranges, hit_point_n_m=ranges.hit_point_n_m + off)
+        floor = None if nav.floor_z_m is None else nav.floor_z_m + off[2]
+        return sink(dataclasses.replace(nav, pos_n_m=nav.pos_n_m + off, ranges=ranges, floor_z_m=floor))
 
     return shifted
 

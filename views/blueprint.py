@@ -48,6 +48,7 @@ SHOE_HALF_SIZE_M = (0.13, 0.05, 0.035)
 AXES_LENGTH_M = 0.15
 STEP_RADIUS_M = 0.025
 LINE_RADIUS_M = 0.006
+FLOOR_HIT_RADIUS_M = 0.003
 
 SWING_RGB = (255, 140, 0)
 STANCE_RGB = (0, 160, 255)
@@ -107,6 +108,7 @@ def build_blueprint(
         overrides[p.truth] = [_trail(), rr.Points3D.from_fields(radii=TRUTH_RADIUS_M, show_labels=False)]
         overrides[p.steps] = [_trail(), rr.Points3D.from_fields(radii=STEP_RADIUS_M, show_labels=False)]
         overrides[p.step_cov] = [_trail()]
+        overrides[p.floor_hits] = [_trail(), rr.Points3D.from_fields(radii=FLOOR_HIT_RADIUS_M, show_labels=False)]
     for run in dual_runs:
         for imu in ("imu1", "imu2"):
             overrides[DualPaths(run).imu(imu)] = [_trail(), rr.Points3D.from_fields(radii=TRACK_RADIUS_M)]

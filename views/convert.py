@@ -321,16 +321,32 @@ def nav_columns(
     return out
 
 
+FLOOR_HIT_ON_LEVEL_RGB = (150, 150, 150)
+"""Colour of a floor hit on a floor level (a tread or floor the foot has stood on)."""
+FLOOR_HIT_OTHER_RGB = (230, 160, 40)
+"""Colour of a floor hit elsewhere (a surface seen only in swing, a step edge's far side, a reflection)."""
+
+
 def tof_columns(nav: NavBatch, paths: FootPaths, totals: NDArray[np.int64]) -> list[SendColumns]:
     """ToF, stride and barometer columns of one batch (empty when it has none).
 
-    Each sensor's measured height per valid reading; per-stride ``[min, max]`` clearance; the
-    cumulative ``[used, gated, invalid status]`` reading counts (``totals`` (3,) is carried between
-    batches and updated in place); pressure altitude.
+    Each reading's floor hit (the 3D floor map); each sensor's measured height per valid reading;
+    per-stride ``[min, max]`` clearance; the cumulative ``[used, gated, invalid status]`` reading
+    counts (``totals`` (3,) is carried between batches and updated in place); pressure altitude.
     """
     out: list[SendColumns] = []
     r = nav.ranges
     if r is not None and len(r):
+        hit = np.isfinite(r.hit_point_n_m[:, 0])
+        if hit.any():
+            colors = np.where(r.hit_on_level[hit, None], FLOOR_HIT_ON_LEVEL_RGB, FLOOR_HIT_OTHER_RGB).astype(np.uint8)
+            out.append(
+                (
+                    paths.floor_hits,
+                    time_column(r.t_s[hit]),
+                    rr.Points3D.columns(positions=r.hit_point_n_m[hit], colors=colors),
+                )
+            )
         valid = np.isfinite(r.height_m)
         for k in np.unique(r.sensor[valid]).tolist():
             sel = valid & (r.sensor == k)

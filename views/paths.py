@@ -96,6 +96,12 @@ class FootPaths:
         return f"{self.root}/steps"
 
     @property
+    def floor_hits(self) -> str:
+        """Where each ToF reading's ray met a floor: x, y and that surface's height (a floor level,
+        else where the ray hit), Points3D, one per reading (a ToF unit's floor map)."""
+        return f"{self.root}/floor_hits"
+
+    @property
     def step_cov(self) -> str:
         """Flat horizontal covariance ellipse at each step (Ellipsoids3D with centers)."""
         return f"{self.root}/step_cov"
