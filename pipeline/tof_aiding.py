@@ -389,10 +389,11 @@ class TofAiding:
         self, x: F64, P: F64, t_s: float, sensor: int, range_m: float, status: int, stance: bool
     ) -> tuple[int, float, float]:
         """Handle one reading at the current filter time ``t_s``; returns (code, measured height,
-        innovation)."""
+        innovation). The levels' heights must be read from ``x`` since the filter last ran
+        (:meth:`sync`, as the navigator does after each stretch of samples); an update here reads
+        them again itself."""
         cfg = self.config
         self.last_hit = None
-        self.sync(x)
         if not stance and self._in_stance:
             self._swing_origin = (float(x[0]), float(x[1]))
         if stance and not self._in_stance:
