@@ -170,7 +170,7 @@ def run_filter_numpy(
             x, P = _update(x, P, H_v, -x[3:6], np.diag([r_zupt, r_zupt, r_v]))
             counters[eskf.CNT_UPDATES] += 1
             y = gyr_b_radps[k] - x[13:16]
-            S = H_bg @ P @ H_bg.T + R_zaru
+            S = H_bg @ P @ H_bg.T + par[eskf.PAR_ZARU_GATE_SIG] ** 2 * _I3  # the gate's noise (pipeline.eskf)
             if float(y @ np.linalg.solve(S, y)) < par[eskf.PAR_ZARU_GATE]:
                 x, P = _update(x, P, H_bg, y, R_zaru)
                 counters[eskf.CNT_ZARU] += 1

@@ -2,3 +2,43 @@
 
 Estimators here are pure and synchronous (numpy, numba); only ``pipeline.runner`` knows asyncio.
 """
+
+import hashlib
+import os
+import shutil
+from pathlib import Path
+
+
+def _key_numba_cache_by_source() -> None:
+    """Put numba's on-disk cache in a folder named by a hash of this package's sources.
+
+    Numba keys each cached kernel by its own module's file only, so a kernel that inlines a function
+    from another module (the smoother's pass inlines ``eskf._correct``) kept running the old code
+    after that other module changed, until its own file changed too (found when ``eskf`` changed and
+    the smoother's last sample no longer matched the filter's). With the folder keyed by every
+    source, any change recompiles (about 10 s, once; the folders of older sources are removed).
+    Left alone when ``NUMBA_CACHE_DIR`` is set or the folder cannot be written (numba then uses its
+    own locations).
+    """
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return
+    here = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for source in sorted(here.glob("*.py")):
+        digest.update(source.name.encode() + source.read_bytes())
+    cache = here / "__pycache__" / f"numba-{digest.hexdigest()[:16]}"
+    if not cache.is_dir():
+        for old in cache.parent.glob("numba-*"):  # the kernels of sources that no longer exist
+            shutil.rmtree(old, ignore_errors=True)
+        try:
+            cache.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            return
+    if not os.access(cache, os.W_OK):
+        return
+    import numba
+
+    numba.config.CACHE_DIR = str(cache)  # type: ignore[attr-defined]
+
+
+_key_numba_cache_by_source()

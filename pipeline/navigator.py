@@ -120,7 +120,8 @@ def filter_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float,
     """Parameter vector of ``eskf.run_filter`` from a unit profile.
 
     The per-sample process noise combines the sensor's white noise at this rate (σ = density·√rate)
-    with the profile's motion noise.
+    with the profile's motion noise; the zero-angular-rate gate uses the gyroscope's white noise alone
+    (``pipeline.eskf``).
     """
     par = np.zeros(eskf.N_PAR)
     par[eskf.PAR_SIG_ACC] = math.hypot(
@@ -132,9 +133,9 @@ def filter_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float,
     par[eskf.PAR_BA_RW] = profile.acc_bias_rw_mps3_rthz
     par[eskf.PAR_BG_RW] = profile.gyr_bias_rw_radps2_rthz
     par[eskf.PAR_ZUPT] = profile.zupt_sigma_mps
-    par[eskf.PAR_ZARU] = math.hypot(
-        profile.zaru_sigma_radps, profile.gyr_noise_radps_rthz * math.sqrt(rate_hz)
-    )
+    gyr_white_radps = profile.gyr_noise_radps_rthz * math.sqrt(rate_hz)
+    par[eskf.PAR_ZARU] = math.hypot(profile.zaru_sigma_radps, gyr_white_radps)
+    par[eskf.PAR_ZARU_GATE_SIG] = gyr_white_radps
     par[eskf.PAR_G] = gravity_mps2
     par[eskf.PAR_DT_MAX] = dt_max_s
     par[eskf.PAR_ZARU_GATE] = ZARU_GATE_CHI2_3DOF
