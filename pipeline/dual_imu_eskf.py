@@ -239,6 +239,7 @@ def run_dual_filter(
     H = np.zeros((3, N_STATE))
     y = np.empty(3)
     r = np.empty(3)
+    r_gate = np.empty(3)
     dx = np.zeros(N_STATE)
     R0 = np.empty((3, 3))
     R1 = np.empty((3, 3))
@@ -382,7 +383,9 @@ def run_dual_filter(
                 else:
                     y[c] = gyr[k, 1, c] - x[19 + c]
                 r[c] = par[PAR_ZARU] ** 2
-            if kf_dense.update3(dx, P, H, y, r, work, par[PAR_ZARU_GATE]) < par[PAR_ZARU_GATE]:
+                # gated against the gyroscopes' own noise (of their mean when both), as pipeline.eskf
+                r_gate[c] = par[PAR_GYR_WHITE] ** 2 * (0.5 if ok0 and ok1 else 1.0)
+            if kf_dense.update3(dx, P, H, y, r, work, par[PAR_ZARU_GATE], r_gate) < par[PAR_ZARU_GATE]:
                 _inject(x, P, dx)
                 counters[CNT_ZARU] += 1
             else:

@@ -72,11 +72,15 @@ def propagate(P: F64, F: F64, ptr: NDArray[np.int64], idx: NDArray[np.int64], q_
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
-def update3(dx: F64, P: F64, H: F64, y: F64, r: F64, work: F64, gate: float = np.inf) -> float:
+def update3(
+    dx: F64, P: F64, H: F64, y: F64, r: F64, work: F64, gate: float = np.inf, r_gate: F64 | None = None
+) -> float:
     """One 3-row update (module docstring); adds ``K y`` to ``dx`` (n,), updates ``P`` (n, n).
 
     ``H`` is (3, n), ``y`` (3,), ``r`` (3,) the noise variances, ``work`` (9, n) scratch. Returns the NIS;
-    when it is ``gate`` or more the update is not applied (a χ² gate).
+    when it is ``gate`` or more the update is not applied (a χ² gate). With ``r_gate`` (3,) the gate's
+    NIS uses those variances instead of ``r`` (the zero-angular-rate gate of ``pipeline.eskf``: tested
+    against the sensor noise, weighted with more), and that NIS is returned.
     """  # pragma: no cover
     n = P.shape[0]
     # rows 0-2 of work: (P Hᵀ)ᵀ = H P (P symmetric)
@@ -106,6 +110,20 @@ def update3(dx: F64, P: F64, H: F64, y: F64, r: F64, work: F64, gate: float = np
         + y[1] * (i01 * y[0] + i11 * y[1] + i12 * y[2])
         + y[2] * (i02 * y[0] + i12 * y[1] + i22 * y[2])
     )
+    if r_gate is not None:
+        g00, g01, g02, g11, g12, g22 = _inv3_spd(
+            S[0, 0] - r[0] + r_gate[0],
+            0.5 * (S[0, 1] + S[1, 0]),
+            0.5 * (S[0, 2] + S[2, 0]),
+            S[1, 1] - r[1] + r_gate[1],
+            0.5 * (S[1, 2] + S[2, 1]),
+            S[2, 2] - r[2] + r_gate[2],
+        )
+        nis = (
+            y[0] * (g00 * y[0] + g01 * y[1] + g02 * y[2])
+            + y[1] * (g01 * y[0] + g11 * y[1] + g12 * y[2])
+            + y[2] * (g02 * y[0] + g12 * y[1] + g22 * y[2])
+        )
     if not nis < gate:
         return nis
     # rows 3-5: Kᵀ = S⁻¹ H P; rows 6-8: D = (K S)ᵀ − H P, so that the Joseph form is

@@ -32,7 +32,8 @@ class UnitProfile:
         motion_gyr_radps: likewise for angular rate, rad/s (OpenShoe 0.3°/s, pyshoe 0.5°/s).
         zupt_sigma_mps: zero-velocity pseudo-measurement 1σ, m/s (OpenShoe 0.1, pyshoe 0.01).
         zaru_sigma_radps: zero-angular-rate pseudo-measurement 1σ during stance, rad/s: the
-            residual rotation of a standing foot plus sensor noise.
+            residual rotation of a standing foot, added to the sensor noise to weigh the update (its
+            χ² gate tests against the sensor noise alone, ``pipeline.eskf``).
         acc_scale_error, gyr_scale_error: 1σ of the error proportional to the signal (scale factor,
             cross-axis sensitivity, acc/gyro timing), as a fraction; process noise grows by it.
         roll_lever_m: distance from the IMU to the point the foot rolls about during stance (heel,

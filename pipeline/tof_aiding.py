@@ -32,7 +32,7 @@ last stance:
   levels are kept as states, the most recently stood on; an older one leaves the state (its row
   and column are dropped, a marginalisation) and keeps its height.
   Measured on the emulated stairs, seeds 1-8, the platform's unit: vertical error at footfalls
-  0.33-1.31 cm, 6.5-20x lower than ZUPT alone. Before, a new level was placed once, at the end of
+  0.33-1.32 cm, 6.7-21x lower than ZUPT alone. Before, a new level was placed once, at the end of
   its first stance (its readings held back until then), and the vertical position error re-anchored
   to it (the row and column of δp_z zeroed): 0.47-1.91 cm, 1.3-27x (seed 3 worst: the bias learned
   at the turn could not reach the treads, and back on those treads the next climb was pulled to

@@ -58,3 +58,28 @@ def test_update3_gate_leaves_state_and_covariance_alone() -> None:
     nis = kf_dense.update3(dx, P, H, np.full(3, 100.0), np.full(3, 0.01), np.empty((9, n)), 11.345)
     assert nis > 11.345 and not dx.any()
     np.testing.assert_array_equal(P, P0)
+
+
+def test_update3_gate_can_use_its_own_noise() -> None:
+    """The zero-angular-rate gate tests against the sensor noise and weighs with a larger one."""
+    rng = np.random.default_rng(4)
+    n = 6
+    P = _spd(n, rng)
+    H = np.zeros((3, n))
+    H[:, :3] = np.eye(3)
+    y = np.array([0.3, -0.2, 0.1])
+    r, r_gate = np.full(3, 0.5), np.full(3, 1e-3)
+    S_gate = H @ P @ H.T + np.diag(r_gate)
+    nis_gate = float(y @ np.linalg.solve(S_gate, y))
+    # a gate the update's noise would pass but the sensor's noise does not: nothing changes
+    P_before, dx = P.copy(), np.zeros(n)
+    nis = kf_dense.update3(dx, P, H, y, r, np.empty((9, n)), nis_gate * 0.9, r_gate)
+    assert np.isclose(nis, nis_gate) and not dx.any()
+    np.testing.assert_array_equal(P, P_before)
+    # when it passes, the update is the one with r
+    dx_ref, P_ref = np.zeros(n), P.copy()
+    kf_dense.update3(dx_ref, P_ref, H, y, r, np.empty((9, n)), np.inf)
+    nis = kf_dense.update3(dx, P, H, y, r, np.empty((9, n)), nis_gate * 1.1, r_gate)
+    assert np.isclose(nis, nis_gate)
+    np.testing.assert_allclose(dx, dx_ref, rtol=1e-12)
+    np.testing.assert_allclose(P, P_ref, rtol=1e-12)
