@@ -37,13 +37,11 @@ foot turns at all, so it tests the rate against the gyroscope's own white noise 
 the bias uncertainty); the update weighs a sample that passes with the profile's residual rotation
 of a standing foot added (``zaru_sigma_radps``). Gated with the update's larger noise, slow
 rotations of up to about 1.8 °/s at the PyShoe unit's 200 Hz passed as bias and turned the heading
-(README "Accuracy": PyShoe ARMSE-2D mean 0.079 → 0.073 m with the separate gate). The price: a
-bias further from its estimate than the gate admits (about 3 × the hypot of the per-sample sensor
-noise and the bias's own σ: 0.5 °/s for the MPU-6500 profile at 1 kHz, 1.2 °/s for the GX3 at
-200 Hz, against 1.5 °/s with the old gate) is not learned, so a profile's turn-on prior
-must cover its unit. Re-opening the bias's variance after a second of still samples all rejected
-(a covariance reset on persistent innovations) recovered 1-2 °/s steps but also took a standing
-foot's slow turning for bias (PyShoe 2018-02-09-11-29-43: 0.097 → 0.415 m), so it is not done. For the same
+(README "Accuracy": PyShoe ARMSE-2D mean 0.079 → 0.073 m). The price: a bias further from its
+estimate than the gate admits (0.5 °/s for the MPU-6500 profile at 1 kHz, 1.2 °/s for the GX3 at
+200 Hz; 1.5 °/s with the old gate) is not learned, so a profile's turn-on prior must cover its unit
+(re-opening the bias after long rejected stretches took a standing foot's slow turning for bias:
+README). For the same
 reason the ZUPT noise admits the velocity of a foot rolling about a contact point at most r from
 the IMU: σ_v² = σ_zupt² + (r |ω|)², since |v_imu| = |ω × r| ≤ r |ω| for a rigid foot.
 

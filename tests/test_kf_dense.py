@@ -64,7 +64,7 @@ def test_update3_gate_can_use_its_own_noise() -> None:
     """The zero-angular-rate gate tests against the sensor noise and weighs with a larger one."""
     rng = np.random.default_rng(4)
     n = 6
-    P = _spd(n, rng)
+    P = 1e-3 * _spd(n, rng)
     H = np.zeros((3, n))
     H[:, :3] = np.eye(3)
     y = np.array([0.3, -0.2, 0.1])
@@ -72,6 +72,7 @@ def test_update3_gate_can_use_its_own_noise() -> None:
     S_gate = H @ P @ H.T + np.diag(r_gate)
     nis_gate = float(y @ np.linalg.solve(S_gate, y))
     # a gate the update's noise would pass but the sensor's noise does not: nothing changes
+    assert float(y @ np.linalg.solve(H @ P @ H.T + np.diag(r), y)) < nis_gate * 0.9
     P_before, dx = P.copy(), np.zeros(n)
     nis = kf_dense.update3(dx, P, H, y, r, np.empty((9, n)), nis_gate * 0.9, r_gate)
     assert np.isclose(nis, nis_gate) and not dx.any()
