@@ -128,14 +128,20 @@ def main(argv: list[str] | None = None) -> int:
         "--all",
         action="store_true",
         help="then the whole system too: benchmarks.e2e (latency, CPU, hour replay, .rrd, memory), "
-        "benchmarks.soak (an hour of two feet, accelerated) and benchmarks.accuracy (about 12 minutes)",
+        "benchmarks.soak (an hour of two feet, accelerated), benchmarks.accuracy and benchmarks.consistency "
+        "(about 12 minutes)",
     )
     args = ap.parse_args(argv)
     if args.all:
         code = main([a for a in (argv if argv is not None else sys.argv[1:]) if a != "--all"])
-        from benchmarks import accuracy, e2e, soak
+        from benchmarks import accuracy, consistency, e2e, soak
 
-        for name, run in (("e2e", e2e.main), ("soak", soak.main), ("accuracy", accuracy.main)):
+        for name, run in (
+            ("e2e", e2e.main),
+            ("soak", soak.main),
+            ("accuracy", accuracy.main),
+            ("consistency", consistency.main),
+        ):
             print(f"\n{'=' * 30} benchmarks.{name} {'=' * 30}\n", flush=True)
             code |= run([])
         return code
