@@ -163,9 +163,11 @@ def test_single_bit_flip_loses_exactly_one_packet(packets: list[DataPacket], bit
     hit = bit // 8 // 34
     framer = Framer(accepted_lengths={28})
     assert framer.feed(bytes(data)) == packets[:hit] + packets[hit + 1 :]
-    # a flipped byte can become a header candidate near the end (e.g. 0xBA -> 0xAA); the framer
-    # rightly waits for more bytes, and the next packet both settles it and arrives intact
-    assert framer.buffered < 6
+    # a flipped byte can become a header candidate (e.g. 0x2A -> 0xAA), even a whole plausible header
+    # (0xAA, a number, length 28) inside the payload, found by hypothesis: the framer rightly waits for
+    # the rest of that candidate (less than one packet), and the next packet both settles it and
+    # arrives intact
+    assert framer.buffered < 34
     follow = DataPacket(0x1234, bytes(range(28)))
     assert framer.feed(encode(follow)) == [follow]
     assert framer.buffered == 0
