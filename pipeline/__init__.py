@@ -6,6 +6,7 @@ Estimators here are pure and synchronous (numpy, numba); only ``pipeline.runner`
 import hashlib
 import os
 import shutil
+import sys
 from pathlib import Path
 
 
@@ -36,9 +37,12 @@ def _key_numba_cache_by_source() -> None:
             return
     if not os.access(cache, os.W_OK):
         return
-    import numba
-
-    numba.config.CACHE_DIR = str(cache)  # type: ignore[attr-defined]
+    # numba reads the variable when it is first imported (not here: importing this package for its
+    # loaders or errors must not load numba); processes started from here inherit it
+    os.environ["NUMBA_CACHE_DIR"] = str(cache)
+    numba = sys.modules.get("numba")
+    if numba is not None:  # imported before this package: set its configuration directly
+        numba.config.CACHE_DIR = str(cache)
 
 
 _key_numba_cache_by_source()
