@@ -27,6 +27,7 @@ from pipeline.height_detector import HeightStanceDetector
 from pipeline.nav_types import NavBatch
 from pipeline.profiles import UnitProfile, get_profile
 from pipeline.samples import ImuBatch
+from pipeline.stance_levels import StanceLevelParams, StanceLevels
 from pipeline.tof_aiding import RangeBatch, RangeOutputs, TofAiding, TofConfig
 
 F64 = NDArray[np.float64]
@@ -58,6 +59,9 @@ class NavConfig:
         init_pos_sigma_m, init_vel_sigma_mps: initial 1σ of position and velocity.
         init_tilt_sigma_rad, init_yaw_sigma_rad: initial 1σ of roll/pitch and of yaw.
         max_wait_s: how much unaligned data to keep while waiting for a still period, s.
+        stance_levels: apply the stance height constraint (``pipeline.stance_levels``: a stance on the
+            floor of the last one is at its height; height changes of a stair or more are kept).
+            With ToF readings their own floor levels (``pipeline.tof_aiding``) take its place.
     """
 
     profile: UnitProfile = field(default_factory=lambda: get_profile("mpu6500x4"))
@@ -71,6 +75,7 @@ class NavConfig:
     init_tilt_sigma_rad: float = math.radians(0.5)
     init_yaw_sigma_rad: float = math.radians(0.01)
     max_wait_s: float = 30.0
+    stance_levels: bool = True
 
 
 @dataclass
@@ -184,6 +189,11 @@ class Navigator:
         self._par = np.zeros(eskf.N_PAR)
         self._t_last = math.nan
         self._counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+        self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels))
+        self._stance_samples = 0
+        """Samples of the stance in progress at the end of the last batch (0 in swing)."""
+        self.level_updates: list[tuple[int, float]] | None = None
+        """When a list: each stance height update, as (sample index since alignment, level height)."""
 
     @property
     def aligned(self) -> bool:
@@ -292,9 +302,7 @@ class Navigator:
         floor_c: F64 | None = None
         ranges: RangeOutputs | None = None
         if not self.tof.active:
-            eskf.run_filter(
-                self._x, self._P, acc, gyr, dt, still_c, ratio, self._par, pos, vel, quat, cov, self._counters
-            )
+            self._run_with_levels(acc, gyr, dt, still_c, ratio, pos, vel, quat, cov)
         else:
             floor_z, floor_c, ranges = self._run_with_ranges(batch, acc, gyr, dt, still_c, ratio, pos, vel, quat, cov)
         c = self._counters
@@ -326,6 +334,33 @@ class Navigator:
             strides=strides,
             altitude=altitude,
         )
+
+    def _run_with_levels(
+        self, acc: F64, gyr: F64, dt: F64, still: NDArray[np.bool_], ratio: F64, pos: F64, vel: F64, quat: F64, cov: F64
+    ) -> None:
+        """The filter over a batch with the stance height constraint applied at the last sample of each
+        stance (``pipeline.stance_levels``): the batch is split there."""
+        n = still.shape[0]
+        carried = self._stance_samples
+        prev = np.empty(n, dtype=np.bool_)
+        prev[0], prev[1:] = carried > 0, still[:-1]
+        starts = np.flatnonzero(~prev & still)  # first sample of a stance
+        a = 0
+        for b in [*np.flatnonzero(prev & ~still).tolist(), n]:  # first sample after a stance, then the end
+            if b > a:
+                eskf.run_filter(
+                    self._x, self._P, acc[a:b], gyr[a:b], dt[a:b], still[a:b], ratio[a:b], self._par,
+                    pos[a:b], vel[a:b], quat[a:b], cov[a:b], self._counters,
+                )  # fmt: skip
+            begun = starts[starts < b]
+            length = b - int(begun[-1]) if begun.size else carried + b
+            if b < n:
+                self._x, self._P, z_level = self.levels.stance_end(self._x, self._P, length / self.rate_hz)
+                if self.level_updates is not None and math.isfinite(z_level):
+                    self.level_updates.append((self.stats.samples_out + b - 1, z_level))
+            else:
+                self._stance_samples = length if still[-1] else 0
+            a = b
 
     def _run_with_ranges(
         self,

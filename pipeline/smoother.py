@@ -82,6 +82,7 @@ from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavConfig, Navigator, NavStats, nav_batch, zupt_ratio
 from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s
 from pipeline.samples import ImuBatch
+from pipeline.stance_levels import StanceLevelParams, StanceLevels, height_update
 
 F64 = NDArray[np.float64]
 
@@ -118,6 +119,8 @@ def _storing_pass(
     stance: NDArray[np.bool_],
     zupt_ratio: F64,
     par: F64,
+    level_z_m: F64,
+    level_r_m2: float,
     xf: F64,
     Pf: F64,
     xp: F64,
@@ -125,7 +128,9 @@ def _storing_pass(
     fn: F64,
     Rm: F64,
 ) -> None:
-    """The causal filter over a segment (``run_filter``'s steps), keeping what the smoother needs.
+    """The causal filter over a segment (``run_filter``'s steps, then the navigator's stance height
+    update where ``level_z_m`` (n,) holds a level's height, NaN elsewhere, with noise ``level_r_m2``),
+    keeping what the smoother needs.
 
     For sample j: ``xp[j]``, ``Pp[j]`` nominal state and covariance after the propagation (before any
     update), ``xf[j]``, ``Pf[j]`` after the updates, ``fn[j]``, ``Rm[j]`` and ``dt_s[j]`` the blocks of
@@ -144,6 +149,7 @@ def _storing_pass(
         or Pp.shape[0] < n
         or fn.shape[0] < n
         or Rm.shape[0] < n
+        or level_z_m.shape[0] != n
     ):
         raise ValueError("_storing_pass: inconsistent array shapes")
     counters = np.zeros(N_CNT, dtype=np.int64)
@@ -170,6 +176,8 @@ def _storing_pass(
             fn[k, 0] = math.nan
         if stance[k] and not bad:
             _correct(x, P, gyr_b_radps, zupt_ratio, k, par, y, work, counters)
+        if math.isfinite(level_z_m[k]):
+            height_update(x, P, -1, level_z_m[k], level_r_m2, work)
         for i in range(16):
             xf[k, i] = x[i]
         for i in range(N_STATE):
@@ -342,6 +350,9 @@ class _CheckpointingNavigator(Navigator):
 
     def __init__(self, config: NavConfig, rate_hz: float, segment_samples: int) -> None:
         super().__init__(config, rate_hz)
+        # the stance levels as constants, so that the updates are of the 15 states the passes store
+        self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels, level_states=0))
+        self.level_updates = []
         self.segment_samples = segment_samples
         self.checkpoints: list[tuple[int, F64, F64, float]] = []  # (first sample, x, P, t before it)
         self.inputs: list[tuple[ImuBatch, NDArray[np.bool_], F64]] = []  # samples, stance, T/γ
@@ -397,6 +408,10 @@ def smooth_recording(
     gyr = np.ascontiguousarray(batch.gyr_b_radps, dtype=np.float64)
     stance = np.ascontiguousarray(still)
     n = len(batch)
+    level_z = np.full(n, np.nan)
+    for k, z in nav.level_updates or ():
+        level_z[k] = z
+    level_r = nav.levels.params.sigma_m**2
     t_first = nav.checkpoints[0][3]
     dt = sample_intervals(batch.t_s, t_first, nav.config.dt_max_s)  # as Navigator._run computes it
     # the outputs are overwritten in place, the smoothed solution replacing the causal one
@@ -416,7 +431,22 @@ def smooth_recording(
         m = stop - a
         x, P = x0.copy(), P0_.copy()
         _storing_pass(
-            x, P, acc[a:stop], gyr[a:stop], dt[a:stop], stance[a:stop], ratio[a:stop], nav._par, xf, Pf, xp, Pp, fn, Rm
+            x,
+            P,
+            acc[a:stop],
+            gyr[a:stop],
+            dt[a:stop],
+            stance[a:stop],
+            ratio[a:stop],
+            nav._par,
+            level_z[a:stop],
+            level_r,
+            xf,
+            Pf,
+            xp,
+            Pp,
+            fn,
+            Rm,
         )
         if is_last:
             ds[:] = 0.0
