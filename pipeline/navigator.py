@@ -27,7 +27,7 @@ from pipeline.height_detector import HeightStanceDetector
 from pipeline.nav_types import NavBatch
 from pipeline.profiles import UnitProfile, get_profile
 from pipeline.samples import ImuBatch
-from pipeline.stance_levels import StanceLevelParams, StanceLevels
+from pipeline.stance_levels import StanceLevelParams, StanceLevels, stance_ends
 from pipeline.tof_aiding import RangeBatch, RangeOutputs, TofAiding, TofConfig
 
 F64 = NDArray[np.float64]
@@ -340,26 +340,20 @@ class Navigator:
     ) -> None:
         """The filter over a batch with the stance height constraint applied at the last sample of each
         stance (``pipeline.stance_levels``): the batch is split there."""
+        assert self._x is not None
         n = still.shape[0]
-        carried = self._stance_samples
-        prev = np.empty(n, dtype=np.bool_)
-        prev[0], prev[1:] = carried > 0, still[:-1]
-        starts = np.flatnonzero(~prev & still)  # first sample of a stance
+        ends, self._stance_samples = stance_ends(still, self._stance_samples)
         a = 0
-        for b in [*np.flatnonzero(prev & ~still).tolist(), n]:  # first sample after a stance, then the end
+        for b, length in [*ends, (n, 0)]:
             if b > a:
                 eskf.run_filter(
                     self._x, self._P, acc[a:b], gyr[a:b], dt[a:b], still[a:b], ratio[a:b], self._par,
                     pos[a:b], vel[a:b], quat[a:b], cov[a:b], self._counters,
                 )  # fmt: skip
-            begun = starts[starts < b]
-            length = b - int(begun[-1]) if begun.size else carried + b
             if b < n:
                 self._x, self._P, z_level = self.levels.stance_end(self._x, self._P, length / self.rate_hz)
                 if self.level_updates is not None and math.isfinite(z_level):
                     self.level_updates.append((self.stats.samples_out + b - 1, z_level))
-            else:
-                self._stance_samples = length if still[-1] else 0
             a = b
 
     def _run_with_ranges(

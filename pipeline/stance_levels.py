@@ -73,6 +73,31 @@ def height_update(x: F64, P: F64, level: int, z_level_m: float, r_m2: float, wor
     inject(x, P, work[0])
 
 
+def stance_ends(still: NDArray[np.bool_], carried: int) -> tuple[list[tuple[int, int]], int]:
+    """Where a batch's stances end, for a navigator that updates after each stance's last sample.
+
+    Args:
+        still: (n,) stance flags of the batch.
+        carried: samples of the stance in progress at the end of the previous batch (0: in swing).
+
+    Returns:
+        (b, length) for each stance that ends in the batch: b the first sample after it (its last
+        sample is b − 1, of the previous batch when b = 0), length its samples; and the samples of
+        the stance in progress at the end of this batch (0 when it ends in swing), to carry on.
+    """
+    n = still.shape[0]
+    prev = np.empty(n, dtype=np.bool_)
+    prev[0], prev[1:] = carried > 0, still[:-1]
+    starts = np.flatnonzero(~prev & still)
+    ends = []
+    for b in np.flatnonzero(prev & ~still).tolist():
+        begun = starts[starts < b]
+        ends.append((b, b - int(begun[-1]) if begun.size else carried + b))
+    if n == 0 or not still[-1]:
+        return ends, 0 if n else carried
+    return ends, n - int(starts[-1]) if starts.size else carried + n
+
+
 @dataclass(frozen=True, slots=True)
 class StanceLevelParams:
     """Settings of the stance height constraint (module docstring), SI units.

@@ -157,10 +157,12 @@ def test_without_the_tof_channel_the_result_is_the_inertial_one(walk70: exp.Reco
     """Readings decoded and shown but not used: the batch is split at every reading, and the result
     is the inertial-only one to the last bit (so the side-by-side gain is the ToF's alone)."""
     t = walk70.truth
-    plain, _ = navigate(t.t_s, walk70.acc_b_mps2, walk70.gyr_b_radps, t.rate_hz)
+    inertial = NavConfig(stance_levels=False)  # with a ToF unit its floor levels replace the stance levels
+    plain, _ = navigate(t.t_s, walk70.acc_b_mps2, walk70.gyr_b_radps, t.rate_hz, inertial)
     shown, _ = navigate(
-        t.t_s, walk70.acc_b_mps2, walk70.gyr_b_radps, t.rate_hz, ranges=walk70.ranges, tof=TofConfig(use=False)
-    )
+        t.t_s, walk70.acc_b_mps2, walk70.gyr_b_radps, t.rate_hz, inertial, ranges=walk70.ranges,
+        tof=TofConfig(use=False),
+    )  # fmt: skip
     assert plain is not None and shown is not None and shown.ranges is not None
     np.testing.assert_array_equal(shown.pos_n_m, plain.pos_n_m)
     np.testing.assert_array_equal(shown.quat_nb_wxyz, plain.quat_nb_wxyz)
@@ -207,7 +209,7 @@ def test_bad_input_is_gated_counted_and_never_pulls_through_the_floor() -> None:
     """Flat floor, 20 % time-outs, 10 % reflections (ranges 5-50 cm too long), odd readings."""
     rec, ranges = _bad_recording("rectangle")
     t = rec.truth
-    zupt, _ = navigate(t.t_s, rec.acc_b_mps2, rec.gyr_b_radps, t.rate_hz)
+    zupt, _ = navigate(t.t_s, rec.acc_b_mps2, rec.gyr_b_radps, t.rate_hz, NavConfig(stance_levels=False))
     nav, _ = navigate(t.t_s, rec.acc_b_mps2, rec.gyr_b_radps, t.rate_hz, ranges=ranges)
     assert nav is not None and nav.ranges is not None and zupt is not None
     counts = exp._counts(nav)
@@ -231,7 +233,7 @@ def test_bad_input_on_stairs_is_no_worse_than_zupt_alone(seed: int) -> None:
     alone: 0.30 vs 0.24 cm (the other seven 0.25-1.06 cm, below it)."""
     rec, ranges = _bad_recording("stairs", seed)
     t = rec.truth
-    zupt, _ = navigate(t.t_s, rec.acc_b_mps2, rec.gyr_b_radps, t.rate_hz)
+    zupt, _ = navigate(t.t_s, rec.acc_b_mps2, rec.gyr_b_radps, t.rate_hz, NavConfig(stance_levels=False))
     nav, _ = navigate(t.t_s, rec.acc_b_mps2, rec.gyr_b_radps, t.rate_hz, ranges=ranges)
     assert nav is not None and zupt is not None
     first = len(t) - len(nav)

@@ -116,9 +116,11 @@ def figures(truth: GaitTruth, nav: NavBatch, readings: dict[str, int], snap_m: f
 
 
 def compare(rec: Recording, tof: TofConfig | None = None) -> tuple[RunFigures, RunFigures]:
-    """(inertial only, with ToF) figures for the same recording, one navigator configuration."""
+    """(ZUPT alone, with ToF) figures for the same recording, one navigator configuration. ZUPT alone
+    is the inertial-only filter without its stance height constraint (``pipeline.stance_levels``,
+    which the ToF floor levels replace): zero-velocity aiding, the baseline of the ToF figures."""
     t = rec.truth
-    config = NavConfig(profile=get_profile("mpu6500x4"))
+    config = NavConfig(profile=get_profile("mpu6500x4"), stance_levels=False)
     out = []
     for ranges in (None, rec.ranges):
         nav, _ = navigate(t.t_s, rec.acc_b_mps2, rec.gyr_b_radps, t.rate_hz, config, ranges=ranges, tof=tof)
