@@ -47,6 +47,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -177,6 +178,20 @@ class DualEskfTrack:
     imu_ok: NDArray[np.bool_]
     counters: dict[str, int]
     messages: tuple[str, ...] = ()
+
+
+def concat_tracks(parts: list[DualEskfTrack]) -> DualEskfTrack:
+    """One track of consecutive ones (counters and messages, which cover everything since the start,
+    from the last)."""
+    if len(parts) == 1:
+        return parts[0]
+    last = parts[-1]
+    arrays = {
+        f.name: np.concatenate([getattr(p, f.name) for p in parts])
+        for f in dataclasses.fields(DualEskfTrack)
+        if f.name not in ("counters", "messages")
+    }
+    return DualEskfTrack(**arrays, counters=last.counters, messages=last.messages)
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"})

@@ -22,10 +22,11 @@ from numpy.typing import NDArray
 
 from pipeline.detectors import DetectorParams, StreamingDetector
 from pipeline.dual_imu_common import ACC_FULL_SCALE_MPS2, GYR_FULL_SCALE_RADPS
-from pipeline.dual_imu_eskf import DualEskfConfig, DualEskfStream, DualEskfTrack
+from pipeline.dual_imu_eskf import DualEskfConfig, DualEskfStream, DualEskfTrack, concat_tracks
 from pipeline.eskf import sample_intervals
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavStats, zupt_ratio
+from pipeline.stance_levels import StanceLevelParams, StanceLevels, stance_ends
 
 F64 = NDArray[np.float64]
 
@@ -67,6 +68,9 @@ class DualNavConfig:
         lever_b_m: IMU 2's position in IMU 1's axes, m.
         align_max_rate_radps: quiet for alignment means |ω| below this on both IMUs, rad/s.
         max_wait_s: unaligned data kept while waiting for a still period, s.
+        stance_levels: apply the stance height constraint of the single-IMU navigator
+            (``pipeline.stance_levels``) to the board's midpoint, its levels constants (the dual
+            filter's state has a fixed size).
     """
 
     filter: DualEskfConfig = field(default_factory=DualEskfConfig)
@@ -74,6 +78,7 @@ class DualNavConfig:
     lever_b_m: tuple[float, float, float] = DEFAULT_LEVER_B_M
     align_max_rate_radps: float = 0.3
     max_wait_s: float = 30.0
+    stance_levels: bool = True
 
 
 class DualNavigator:
@@ -95,6 +100,8 @@ class DualNavigator:
         biases, constraint residuals), for sinks that show more than the NavBatch holds."""
         self._pending: list[tuple[NDArray[Any], ...]] = []  # (t, acc, gyr, host, stat, threshold, still)
         self._t_last = math.nan
+        self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels, level_states=0))
+        self._stance_samples = 0
 
     @property
     def messages(self) -> tuple[str, ...]:
@@ -148,6 +155,7 @@ class DualNavigator:
         self.filter = DualEskfStream(
             self.config.filter, np.asarray(self.config.lever_b_m), self.rate_hz, acc[window], gyr[window]
         )
+        self.levels.levels_z_m[0] = float(self.filter.x[2])  # the start floor, under the board's midpoint
         self.stats.samples_before_alignment += start
         self.stats.aligned_at_s = float(t[start])
         self._t_last = float(t[start]) - 1.0 / self.rate_hz
@@ -168,7 +176,17 @@ class DualNavigator:
         assert self.filter is not None
         dt = sample_intervals(t, self._t_last, self.config.filter.dt_max_s)
         self._t_last = float(t[-1])
-        track = self.filter.step(t, acc, gyr, still, dt, zupt_ratio(stat, threshold))
+        ratio = zupt_ratio(stat, threshold)
+        f = self.filter
+        ends, self._stance_samples = stance_ends(still, self._stance_samples)
+        parts, a = [], 0
+        for b, length in [*ends, (t.shape[0], 0)]:
+            if b > a:
+                parts.append(f.step(t[a:b], acc[a:b], gyr[a:b], still[a:b], dt[a:b], ratio[a:b]))
+            if b < t.shape[0]:
+                f.x, f.P, _ = self.levels.stance_end(f.x, f.P, length / self.rate_hz)
+            a = b
+        track = concat_tracks(parts)
         self.last_track = track
         c = track.counters
         s = self.stats
