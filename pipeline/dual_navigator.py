@@ -26,7 +26,7 @@ from pipeline.dual_imu_eskf import DualEskfConfig, DualEskfStream, DualEskfTrack
 from pipeline.eskf import sample_intervals
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavStats, zupt_ratio
-from pipeline.stance_levels import StanceLevelParams, StanceLevels, stance_ends
+from pipeline.stance_levels import StanceLevelParams, StanceLevels, stance_update_points
 
 F64 = NDArray[np.float64]
 
@@ -178,14 +178,16 @@ class DualNavigator:
         self._t_last = float(t[-1])
         ratio = zupt_ratio(stat, threshold)
         f = self.filter
-        ends, self._stance_samples = stance_ends(still, self._stance_samples)
+        after = max(1, round(self.levels.params.update_after_s * self.rate_hz))
+        points, self._stance_samples = stance_update_points(still, self._stance_samples, after)
         parts, a = [], 0
-        for b, length in [*ends, (t.shape[0], 0)]:
-            if b > a:
-                parts.append(f.step(t[a:b], acc[a:b], gyr[a:b], still[a:b], dt[a:b], ratio[a:b]))
-            if b < t.shape[0]:
-                f.x, f.P, _ = self.levels.stance_end(f.x, f.P, length / self.rate_hz)
-            a = b
+        for b in [*points, None]:  # None: the rest of the batch, with no update after it
+            end = t.shape[0] if b is None else b
+            if end > a:
+                parts.append(f.step(t[a:end], acc[a:end], gyr[a:end], still[a:end], dt[a:end], ratio[a:end]))
+            if b is not None:
+                f.x, f.P, _ = self.levels.stance_update(f.x, f.P)
+            a = end
         track = concat_tracks(parts)
         self.last_track = track
         c = track.counters

@@ -27,7 +27,7 @@ from pipeline.height_detector import HeightStanceDetector
 from pipeline.nav_types import NavBatch
 from pipeline.profiles import UnitProfile, get_profile
 from pipeline.samples import ImuBatch
-from pipeline.stance_levels import StanceLevelParams, StanceLevels, stance_ends
+from pipeline.stance_levels import StanceLevelParams, StanceLevels, stance_update_points
 from pipeline.tof_aiding import RangeBatch, RangeOutputs, TofAiding, TofConfig
 
 F64 = NDArray[np.float64]
@@ -338,23 +338,25 @@ class Navigator:
     def _run_with_levels(
         self, acc: F64, gyr: F64, dt: F64, still: NDArray[np.bool_], ratio: F64, pos: F64, vel: F64, quat: F64, cov: F64
     ) -> None:
-        """The filter over a batch with the stance height constraint applied at the last sample of each
-        stance (``pipeline.stance_levels``): the batch is split there."""
+        """The filter over a batch with the stance height constraint applied once in each stance
+        (``pipeline.stance_levels``): the batch is split there."""
         assert self._x is not None
         n = still.shape[0]
-        ends, self._stance_samples = stance_ends(still, self._stance_samples)
+        after = max(1, round(self.levels.params.update_after_s * self.rate_hz))
+        points, self._stance_samples = stance_update_points(still, self._stance_samples, after)
         a = 0
-        for b, length in [*ends, (n, 0)]:
-            if b > a:
+        for b in [*points, None]:  # None: the rest of the batch, with no update after it
+            end = n if b is None else b
+            if end > a:
                 eskf.run_filter(
-                    self._x, self._P, acc[a:b], gyr[a:b], dt[a:b], still[a:b], ratio[a:b], self._par,
-                    pos[a:b], vel[a:b], quat[a:b], cov[a:b], self._counters,
+                    self._x, self._P, acc[a:end], gyr[a:end], dt[a:end], still[a:end], ratio[a:end], self._par,
+                    pos[a:end], vel[a:end], quat[a:end], cov[a:end], self._counters,
                 )  # fmt: skip
-            if b < n:
-                self._x, self._P, z_level = self.levels.stance_end(self._x, self._P, length / self.rate_hz)
+            if b is not None:
+                self._x, self._P, z_level = self.levels.stance_update(self._x, self._P)
                 if self.level_updates is not None and math.isfinite(z_level):
                     self.level_updates.append((self.stats.samples_out + b - 1, z_level))
-            a = b
+            a = end
 
     def _run_with_ranges(
         self,

@@ -1,36 +1,39 @@
 """Floor levels from the stances alone: a gated height constraint for the inertial-only filter.
 
-A foot at rest stands on a floor, and floors are level: a stance on the floor of the previous stance
-puts the IMU at the height it had there, within the stance-to-stance scatter of its rest height. The
+A foot at rest stands on a floor, and floors are level: a stance on the floor of the last stance puts
+the IMU at the height it had there, within the stance-to-stance scatter of its rest height. The
 height constraint of Abdulrahim, Hide, Moore and Hill ("Using constraints for shoe mounted indoor
-pedestrian navigation", J. Navigation 65(1), 2012, §4) applies this when the height changed less than
-a threshold since the last stance and not otherwise, so a stair (one or two risers, 10-40 cm, per
-stride) starts a new level and a level walk is held on its floor. footnav keeps every level stood on
-and returns to one within ``snap_m`` (the way back down a flight ends on the floor it started from).
+pedestrian navigation", J. Navigation 65(1), 2012) applies this when the height changed less than a
+threshold since the last stance and not otherwise, so a stair (one or two risers per stride, 10-40
+cm) starts a new level and a level walk is held on its floor. footnav keeps every level stood on and
+returns to one within ``snap_m`` (the way back down a flight ends on the floor it started from).
 
-The measurement, once per stance (at its last sample, when the zero-velocity updates have corrected
-the position by what they learned about the swing; a stance shorter than ``min_stance_s`` is not
-used):
+The measurement, once per stance, ``update_after_s`` after it began (or at its end if it is
+shorter: :func:`stance_update_points`), when the loading response of the stance is over and the foot
+is flat (0-10 % of the gait cycle, about 0.1 s at a walk; Perry and Burnfield, "Gait Analysis:
+Normal and Pathological Function", 2nd ed., 2010, ch. 2; the zero-velocity updates hold the position
+from then to the stance's end):
 
     0 = p_z − z_level + w,   w ~ N(0, σ²),  σ = ``sigma_m``
 
-with z_level the level's height. The start floor is z = 0 by definition of the frame (the IMU rests
-on it at alignment) and is not a state. Every other level is a state of the filter, a stochastic
-clone of δp_z when it is placed (Roumeliotis and Burdick, ICRA 2002; as the ToF floor levels of
-:mod:`pipeline.tof_aiding`), so what the filter learns later corrects the level too. The levels
-stood on most recently, up to :data:`LEVEL_STATES`, are states; an older one leaves the state
-(marginalised) and keeps its height.
+The start floor is where the IMU rests at alignment (z = 0 for the single-IMU filter) and is not a
+state. Every other level is a state of the filter, a stochastic clone of δp_z when it is placed
+(Roumeliotis and Burdick, "Stochastic cloning", ICRA 2002; as the ToF floor levels of
+:mod:`pipeline.tof_aiding`), so what the filter learns later corrects the level too; the
+``level_states`` levels stood on most recently are states, an older one leaves the state
+(marginalised) and keeps its height. With ``level_states = 0`` every level is a constant (the
+smoother's forward pass and the dual-IMU navigator, whose filters have a fixed state).
 
 What it assumes, and what it costs: the floor under a stance is one of the levels already stood on
 when it is within ``same_level_m`` of the last one (or ``snap_m`` of another); a height change of less
-than that per stride (a ramp of under about 4 %, a 5 cm threshold, a thick mat) is taken for drift
-and removed. Larger changes are kept as they are measured, so stairs stay stairs. ``use = False``
-turns it off (the inertial-only filter of the README's "without levels" rows).
+than that per stride (a ramp under about 4 %, a thick mat, a 5 cm step) is taken for drift and
+removed. Larger changes are kept as the inertial solution measures them, so stairs stay stairs.
+``use = False`` turns it off (zero-velocity aiding alone).
 
-``sigma_m``: the rest height of the IMU scatters from stance to stance on one floor by the foot's
-posture at rest. On the PyShoe VICON trials the motion-capture height of the foot at consecutive
-detected stances differs by a median of 0.2-0.7 cm (90th percentile 0.5-2.7 cm, measured here on
-the nine trials of ``../shared/data``); 1 cm is used.
+``sigma_m``: the rest height of the IMU scatters from stance to stance on one floor with the foot's
+posture. On the PyShoe VICON trials the motion-capture height of the foot at consecutive detected
+stances differs by a median of 0.2-0.7 cm (90th percentile 0.5-2.7 cm; the nine trials of
+``../shared/data``); 1 cm is used.
 """
 
 from __future__ import annotations
@@ -73,29 +76,34 @@ def height_update(x: F64, P: F64, level: int, z_level_m: float, r_m2: float, wor
     inject(x, P, work[0])
 
 
-def stance_ends(still: NDArray[np.bool_], carried: int) -> tuple[list[tuple[int, int]], int]:
-    """Where a batch's stances end, for a navigator that updates after each stance's last sample.
+def stance_update_points(still: NDArray[np.bool_], carried: int, after: int) -> tuple[list[int], int]:
+    """Where a navigator applies the height update of each stance: after the stance's ``after``-th
+    sample, or after its last one if it is shorter.
 
     Args:
         still: (n,) stance flags of the batch.
         carried: samples of the stance in progress at the end of the previous batch (0: in swing).
+        after: samples of stance before the update (≥ 1).
 
     Returns:
-        (b, length) for each stance that ends in the batch: b the first sample after it (its last
-        sample is b − 1, of the previous batch when b = 0), length its samples; and the samples of
-        the stance in progress at the end of this batch (0 when it ends in swing), to carry on.
+        The indices b of the batch's samples before which an update is due (the update follows
+        sample b − 1, of the previous batch when b = 0), in order; and the samples of the stance in
+        progress at the end of this batch (0 when it ends in swing), to carry on.
     """
     n = still.shape[0]
-    prev = np.empty(n, dtype=np.bool_)
-    prev[0], prev[1:] = carried > 0, still[:-1]
-    starts = np.flatnonzero(~prev & still)
-    ends = []
-    for b in np.flatnonzero(prev & ~still).tolist():
-        begun = starts[starts < b]
-        ends.append((b, b - int(begun[-1]) if begun.size else carried + b))
-    if n == 0 or not still[-1]:
-        return ends, 0 if n else carried
-    return ends, n - int(starts[-1]) if starts.size else carried + n
+    if n == 0:
+        return [], carried
+    idx = np.arange(n)
+    last_swing = np.maximum.accumulate(np.where(still, -1, idx))
+    run = np.where(last_swing < 0, idx + 1 + carried, idx - last_swing)
+    run[~still] = 0
+    ends = np.zeros(n, dtype=np.bool_)
+    ends[:-1] = still[:-1] & ~still[1:]
+    due = still & ((run == after) | (ends & (run < after)))
+    points = (np.flatnonzero(due) + 1).tolist()
+    if not still[0] and 0 < carried < after:
+        points.insert(0, 0)
+    return points, int(run[-1])
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,7 +115,8 @@ class StanceLevelParams:
         sigma_m: 1σ of the IMU's rest height about its floor level, stance to stance.
         same_level_m: a stance within this of the last stance's level is on that level.
         snap_m: else, a stance within this of another known level is back on that level.
-        min_stance_s: stances shorter than this are not used.
+        update_after_s: the update is made this long after the stance began (or at its end if it
+            is shorter): the foot is flat by then (module docstring).
         new_level_sigma_m: 1σ added to a new level's clone of the height error.
         level_states: how many levels are states of the filter (0: each level is a constant, its
             height where it was first stood on; the smoother's forward pass, ``pipeline.smoother``).
@@ -117,7 +126,7 @@ class StanceLevelParams:
     sigma_m: float = 0.01
     same_level_m: float = 0.05
     snap_m: float = 0.05
-    min_stance_s: float = 0.0
+    update_after_s: float = 0.1
     new_level_sigma_m: float = 0.001
     level_states: int = LEVEL_STATES
 
@@ -129,7 +138,7 @@ class LevelCounts:
     updates: int = 0
     new_levels: int = 0
     returns: int = 0
-    short_stances: int = 0
+    not_finite: int = 0
 
 
 class StanceLevels:
@@ -157,15 +166,15 @@ class StanceLevels:
             if i >= 0:
                 self.levels_z_m[k] = float(x[i + 1])
 
-    def stance_end(self, x: F64, P: F64, duration_s: float) -> tuple[F64, F64, float]:
-        """The height update at the last sample of a stance of ``duration_s``; returns the state and
-        covariance (grown by one when a new level became a state, else the same arrays, updated in
-        place) and the height of the level it was updated against (NaN: no update)."""
+    def stance_update(self, x: F64, P: F64) -> tuple[F64, F64, float]:
+        """The height update of a stance (at the sample :func:`stance_update_points` gives); returns
+        the state and covariance (grown by one when a new level became a state, else the same arrays,
+        updated in place) and the height of the level it was updated against (NaN: no update)."""
         cfg = self.params
         if not cfg.use:
             return x, P, math.nan
-        if duration_s < cfg.min_stance_s or not math.isfinite(float(x[P0 + 2])):
-            self.counts.short_stances += 1
+        if not math.isfinite(float(x[P0 + 2])):
+            self.counts.not_finite += 1
             return x, P, math.nan
         self.sync(x)
         self._stance_no += 1
