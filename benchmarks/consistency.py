@@ -41,7 +41,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from device.emulator.gait import simulate_walk
-from device.emulator.imu_errors import IMU_GRADES, ImuGrade, corrupt
+from device.emulator.imu_errors import AXIS_ERRORS, IMU_GRADES, ImuGrade, corrupt
 from pipeline.navigator import NavConfig, navigate
 from pipeline.profiles import UnitProfile, get_profile
 
@@ -78,12 +78,15 @@ def profile_of_grade(grade: ImuGrade, base: UnitProfile) -> UnitProfile:
     )
 
 
-def nees_per_second(path: str, duration_s: float, runs: int, profile: UnitProfile) -> dict[str, F64]:
-    """(runs, seconds) NEES of each component (``COMPONENTS``), from 1 s after alignment."""
+def nees_per_second(
+    path: str, duration_s: float, runs: int, profile: UnitProfile, axes: str = "none"
+) -> dict[str, F64]:
+    """(runs, seconds) NEES of each component (``COMPONENTS``), from 1 s after alignment, with the
+    emulated IMU's scale-factor and cross-axis errors ``axes`` (``device.emulator.imu_errors``)."""
     truth = simulate_walk(path, duration_s, rate_hz=RATE_HZ, seed=0)
     out: dict[str, list[F64]] = {name: [] for name, _ in COMPONENTS}
     for seed in range(1, runs + 1):
-        acc, gyr, _ = corrupt(truth.acc_b_mps2, truth.gyr_b_radps, RATE_HZ, GRADE, seed=seed)
+        acc, gyr, _ = corrupt(truth.acc_b_mps2, truth.gyr_b_radps, RATE_HZ, GRADE, seed=seed, axes=axes)
         nav, _ = navigate(truth.t_s, acc, gyr, RATE_HZ, NavConfig(profile=profile))
         assert nav is not None
         every = int(RATE_HZ)
@@ -112,11 +115,15 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=16)
     ap.add_argument("--duration", type=float, default=240.0, help="s per walk")
+    ap.add_argument("--axis-errors", choices=sorted(AXIS_ERRORS), default="none", help="of the emulated IMUs")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     base = get_profile(GRADE)
     profiles = (("default", base), ("emulated", profile_of_grade(IMU_GRADES[GRADE], base)))
-    print(f"{args.runs} runs per walk, {args.duration:.0f} s, ANEES per second against its 95 % band")
+    print(
+        f"{args.runs} runs per walk, {args.duration:.0f} s, axis errors {args.axis_errors!r}, "
+        "ANEES per second against its 95 % band"
+    )
     print(
         f"{'walk':<10} {'profile':<9} "
         + "  ".join(f"{name + ' (d=' + str(sl.stop - sl.start) + ')':>27}" for name, sl in COMPONENTS)
@@ -124,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'':<20} " + "  ".join(f"{'median  in/below/above %':>27}" for _ in COMPONENTS))
     for path in WALKS:
         for label, profile in profiles:
-            nees = nees_per_second(path, args.duration, args.runs, profile)
+            nees = nees_per_second(path, args.duration, args.runs, profile, args.axis_errors)
             cells = []
             for name, sl in COMPONENTS:
                 med, inside, below, above = summary(nees[name], sl.stop - sl.start)

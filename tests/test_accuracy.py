@@ -46,7 +46,7 @@ def test_pyshoe_vicon_trials(evaluations) -> None:  # type: ignore[no-untyped-de
 
 def test_closed_loops(evaluations) -> None:  # type: ignore[no-untyped-def]
     xio, openshoe = evaluations["short_walk"], evaluations["data_inert"]
-    # measured 3D / 2D: x-io 0.051 / 0.051 m, OpenShoe 0.097 / 0.095 m with the stance height
+    # measured 3D / 2D: x-io 0.051 / 0.051 m, OpenShoe 0.099 / 0.099 m with the stance height
     # constraint (pipeline.stance_levels); without it 0.248 / 0.054 and 0.776 / 0.102 m (0.248 / 0.051
     # and 0.774 / 0.094 with the earlier ZARU gate, pipeline.eskf; 0.261 / 0.052 and 0.838 / 0.090
     # with a hard vertical ZUPT)
