@@ -302,7 +302,7 @@ class Navigator:
         floor_c: F64 | None = None
         ranges: RangeOutputs | None = None
         if not self.tof.active:
-            self._run_with_levels(acc, gyr, dt, still_c, ratio, pos, vel, quat, cov)
+            floor_c = self._run_with_levels(acc, gyr, dt, still_c, ratio, pos, vel, quat, cov)
         else:
             floor_z, floor_c, ranges = self._run_with_ranges(batch, acc, gyr, dt, still_c, ratio, pos, vel, quat, cov)
         c = self._counters
@@ -337,16 +337,20 @@ class Navigator:
 
     def _run_with_levels(
         self, acc: F64, gyr: F64, dt: F64, still: NDArray[np.bool_], ratio: F64, pos: F64, vel: F64, quat: F64, cov: F64
-    ) -> None:
+    ) -> F64:
         """The filter over a batch with the stance height constraint applied once in each stance
-        (``pipeline.stance_levels``): the batch is split there."""
+        (``pipeline.stance_levels``): the batch is split there. Returns the height of the floor each
+        sample's clearance is measured from (n,): the level of its stance, or in swing the level of
+        the stance before (the start floor, z = 0, without the constraint)."""
         assert self._x is not None
         n = still.shape[0]
         after = max(1, round(self.levels.params.update_after_s * self.rate_hz))
         points, self._stance_samples = stance_update_points(still, self._stance_samples, after)
+        floor = np.empty(n)
         a = 0
         for b in [*points, None]:  # None: the rest of the batch, with no update after it
             end = n if b is None else b
+            floor[a:end] = self.levels.floor_z_m
             if end > a:
                 eskf.run_filter(
                     self._x, self._P, acc[a:end], gyr[a:end], dt[a:end], still[a:end], ratio[a:end], self._par,
@@ -356,7 +360,10 @@ class Navigator:
                 self._x, self._P, z_level = self.levels.stance_update(self._x, self._P)
                 if self.level_updates is not None and math.isfinite(z_level):
                     self.level_updates.append((self.stats.samples_out + b - 1, z_level))
+                swing = np.flatnonzero(~still[:b])  # this stance's samples in the batch are on its level
+                floor[(int(swing[-1]) + 1 if swing.size else 0) : b] = self.levels.floor_z_m
             a = end
+        return floor
 
     def _run_with_ranges(
         self,

@@ -363,13 +363,14 @@ class _CheckpointingNavigator(Navigator):
         self.inputs.append((batch, still, zupt_ratio(stat, threshold)))
         n, seg = len(batch), self.segment_samples
         pos, vel = np.empty((n, 3)), np.empty((n, 3))
-        quat, cov = np.empty((n, 4)), np.empty((n, 4, 4))
+        quat, cov, clearance = np.empty((n, 4)), np.empty((n, 4, 4)), np.empty(n)
         for a in range(0, n, seg):
             b = min(n, a + seg)
             self.checkpoints.append((offset + a, self._x.copy(), self._P.copy(), self._t_last))
             out = super()._run(batch.select(slice(a, b)), stat[a:b], threshold[a:b], still[a:b])
             pos[a:b], vel[a:b], quat[a:b], cov[a:b] = out.pos_n_m, out.vel_n_mps, out.quat_nb_wxyz, out.cov_pos_yaw
-        return nav_batch(batch, pos, vel, quat, cov, stat, threshold, still)
+            clearance[a:b] = out.clearance_m
+        return nav_batch(batch, pos, vel, quat, cov, stat, threshold, still, clearance_m=clearance)
 
 
 def smooth_recording(
@@ -414,6 +415,7 @@ def smooth_recording(
     level_r = nav.levels.params.sigma_m**2
     t_first = nav.checkpoints[0][3]
     dt = sample_intervals(batch.t_s, t_first, nav.config.dt_max_s)  # as Navigator._run computes it
+    floor_z = out.pos_n_m[:, 2] - out.clearance_m  # the floor each clearance is measured from
     # the outputs are overwritten in place, the smoothed solution replacing the causal one
     pos, vel, quat, cov = out.pos_n_m, out.vel_n_mps, out.quat_nb_wxyz, out.cov_pos_yaw
     assert cov is not None
@@ -480,7 +482,7 @@ def smooth_recording(
             stance=out.stance,
             detector_stat=out.detector_stat,
             detector_threshold=out.detector_threshold,
-            clearance_m=pos[:, 2].copy(),
+            clearance_m=pos[:, 2] - floor_z,
             host_ns=out.host_ns,
             cov_pos_yaw=cov,
         ),

@@ -214,3 +214,22 @@ def test_smoother_applies_the_levels_as_its_forward_filter_does() -> None:
         return float(np.sqrt(np.mean((nb.pos_n_m[st, 2] - truth.pos_n_m[st, 2]) ** 2)))
 
     assert rms(smoothed) <= 1.1 * rms(causal) and rms(smoothed) <= 0.3 * rms(off)
+
+
+def test_clearance_is_measured_from_the_stances_floor() -> None:
+    """Inertial-only stairs: the clearance is the height above the level of the foot's stance (in swing,
+    of the stance it left), so it is near zero in every stance instead of the tread's height above the
+    start floor (seed 2: 0.54 cm RMS at footfalls, smoothed 0.19 cm; the climb is 4 m); the same with
+    the smoother."""
+    truth, acc, gyr = _stairs_with_axis_errors()
+    cfg = NavConfig(profile=get_profile("mpu6500x4"))
+    nav, _ = navigate(truth.t_s, acc, gyr, truth.rate_hz, cfg)
+    smoothed, _ = smooth_recording(truth.t_s, acc, gyr, truth.rate_hz, cfg)
+    assert nav is not None and smoothed is not None
+    first = len(truth.t_s) - len(nav)
+    st = truth.stance[first:] & nav.stance
+    assert truth.pos_n_m[first:][st, 2].max() > 1.0
+    for out in (nav, smoothed):
+        assert float(np.sqrt(np.mean(out.clearance_m[st] ** 2))) <= 0.03
+    # in swing the clearance tops a stair walk's foot lift (10-40 cm above the floor left), not metres
+    assert 0.05 < float(np.max(nav.clearance_m)) < 0.6
