@@ -34,7 +34,8 @@ class NavBatch:
         clearance_m: (n,) height of the IMU above the floor under it, m: above ``floor_z_m`` when the
             ToF sensors give it (except between the hits on both sides of a step edge, where the
             floor is interpolated between the two treads: ``pipeline.tof_aiding``), else above the
-            floor the walk started on (z = 0).
+            floor level of the foot's stance, in swing of the stance it left
+            (``pipeline.stance_levels``; without them, the floor the walk started on, z = 0).
         host_ns: (n,) host receive time of each sample (latency accounting).
         cov_pos_yaw: (n, 4, 4) covariance of (x, y, z, ψ) when the estimator provides it (steps,
             heading uncertainty); ``pos_cov_n_m2`` is its upper-left block.
