@@ -354,7 +354,10 @@ class _CheckpointingNavigator(Navigator):
         self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels, level_states=0))
         self.level_updates = []
         self.segment_samples = segment_samples
-        self.checkpoints: list[tuple[int, F64, F64, float]] = []  # (first sample, x, P, t before it)
+        self.checkpoints: list[tuple[int, F64, F64, float, int]] = []
+        """Per segment: first sample, x, P, the time before it, and how many stance height updates
+        had been applied (one due after the sample before the segment is applied in the segment's
+        own run, after its checkpoint)."""
         self.inputs: list[tuple[ImuBatch, NDArray[np.bool_], F64]] = []  # samples, stance, T/γ
 
     def _run(self, batch: ImuBatch, stat: F64, threshold: F64, still: NDArray[np.bool_]) -> NavBatch:
@@ -366,7 +369,8 @@ class _CheckpointingNavigator(Navigator):
         quat, cov, clearance = np.empty((n, 4)), np.empty((n, 4, 4)), np.empty(n)
         for a in range(0, n, seg):
             b = min(n, a + seg)
-            self.checkpoints.append((offset + a, self._x.copy(), self._P.copy(), self._t_last))
+            done = len(self.level_updates or ())
+            self.checkpoints.append((offset + a, self._x.copy(), self._P.copy(), self._t_last, done))
             out = super()._run(batch.select(slice(a, b)), stat[a:b], threshold[a:b], still[a:b])
             pos[a:b], vel[a:b], quat[a:b], cov[a:b] = out.pos_n_m, out.vel_n_mps, out.quat_nb_wxyz, out.cov_pos_yaw
             clearance[a:b] = out.clearance_m
@@ -426,30 +430,19 @@ def smooth_recording(
     ds, Ps, xs = np.zeros(eskf.N_STATE), np.empty((eskf.N_STATE, eskf.N_STATE)), np.empty(16)
     starts = [c[0] for c in nav.checkpoints] + [n]
     for i in range(len(nav.checkpoints) - 1, -1, -1):
-        a, x0, P0_, _ = nav.checkpoints[i]
+        a, x0, P0_, _, done = nav.checkpoints[i]
         end = starts[i + 1]
         is_last = end == n
         stop = end if is_last else end + 1  # one sample of overlap: the next segment's first
         m = stop - a
         x, P = x0.copy(), P0_.copy()
+        for k, z in (nav.level_updates or [])[done:]:
+            if k < a:  # due after the previous segment's last sample, applied after this checkpoint
+                height_update(x, P, -1, z, level_r, np.empty((2, eskf.N_STATE)))
         _storing_pass(
-            x,
-            P,
-            acc[a:stop],
-            gyr[a:stop],
-            dt[a:stop],
-            stance[a:stop],
-            ratio[a:stop],
-            nav._par,
-            level_z[a:stop],
-            level_r,
-            xf,
-            Pf,
-            xp,
-            Pp,
-            fn,
-            Rm,
-        )
+            x, P, acc[a:stop], gyr[a:stop], dt[a:stop], stance[a:stop], ratio[a:stop], nav._par,
+            level_z[a:stop], level_r, xf, Pf, xp, Pp, fn, Rm,
+        )  # fmt: skip
         if is_last:
             ds[:] = 0.0
             Ps[:] = Pf[m - 1]

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ import pytest
 from device.emulator.gait import simulate_walk
 from device.emulator.imu_errors import corrupt
 from pipeline import eskf
+from pipeline.loaders import load_recording
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavConfig, Navigator, navigate
 from pipeline.profiles import get_profile
@@ -233,3 +235,18 @@ def test_clearance_is_measured_from_the_stances_floor() -> None:
         assert float(np.sqrt(np.mean(out.clearance_m[st] ** 2))) <= 0.03
     # in swing the clearance tops a stair walk's foot lift (10-40 cm above the floor left), not metres
     assert 0.05 < float(np.max(nav.clearance_m)) < 0.6
+
+
+def test_smoothing_does_not_depend_on_where_segments_cut_short_stances(shared_data: Path) -> None:
+    """A PyShoe trial's stances come in 5-25 ms fragments, shorter than the update's 0.1 s, so their
+    updates fall due after a stance's last sample, at the start of the next batch: with one-sample
+    segments every such update lies on a segment boundary, after the segment's checkpoint."""
+    rec = load_recording(shared_data / "pyshoe-vicon" / "2017-11-27-11-18-11.mat")
+    n = 3000
+    cfg = NavConfig(profile=get_profile(rec.profile))
+    args = (rec.t_s[:n], rec.acc_b_mps2[:n], rec.gyr_b_radps[:n], rec.rate_hz, cfg)
+    whole, _ = smooth_recording(*args)
+    cut, _ = smooth_recording(*args, segment_samples=1)
+    assert whole is not None and cut is not None
+    np.testing.assert_array_equal(cut.pos_n_m, whole.pos_n_m)
+    np.testing.assert_array_equal(cut.cov_pos_yaw, whole.cov_pos_yaw)
