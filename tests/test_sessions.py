@@ -112,9 +112,13 @@ def test_recording_read_back_of_every_view(demo20: Path) -> None:
     assert last.shape[0] >= 50 and d.max() < 1e-5
     # link health and the detector threshold next to its statistic
     rate = _rows(store, "/plots/rate/foot")
-    # one point per batch at most every 0.5 s of device time; at --pace max the reader coalesces the
-    # emulator's backlog into batches of up to about a second, so 20 s give at least ~15 points
-    assert rate.num_rows >= 15
+    # one point per batch at most every 0.5 s of device time (app.session.LinkHealth); at --pace max
+    # the reader coalesces the emulator's backlog into batches whose size follows the machine's load
+    # (14-26 points in 20 s measured here, 14 in a fresh-clone CI run), so the count is bounded
+    # loosely and the spacing exactly
+    t_rate = rate["imu_time"].to_numpy().astype(np.float64) / 1e9
+    assert rate.num_rows >= 10 and np.all(np.diff(t_rate) >= 0.5 - 1e-6)
+    assert t_rate[0] <= 3.5 and t_rate[-1] >= 17.0  # batches of up to about 2 s seen
     errors = _flat(_rows(store, "/plots/link_errors/foot"), "/plots/link_errors/foot:Scalars:scalars")
     assert np.all(errors == 0)
     det = _flat(_rows(store, "/plots/detector/foot"), "/plots/detector/foot:Scalars:scalars").reshape(-1, 2)
