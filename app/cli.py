@@ -274,6 +274,7 @@ def build_parser() -> argparse.ArgumentParser:
         "paths", type=Path, nargs="+", metavar="PATH", help="recordings, or folders of them"
     )
     evaluate.add_argument("--smooth", action="store_true", help="evaluate the smoothed (non-causal) solution")
+    _add_levels_arg(evaluate)
 
     from app.experiments import add_experiment_parsers
 
@@ -305,6 +306,16 @@ def _add_recording_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--smooth", action="store_true", help="smoothed (non-causal) solution instead of the live one"
     )
+    _add_levels_arg(parser)
+
+
+def _add_levels_arg(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--no-stance-levels",
+        dest="stance_levels",
+        action="store_false",
+        help="zero-velocity aiding alone: no stance height levels (README, Accuracy)",
+    )
 
 
 def _export(args: argparse.Namespace) -> int:
@@ -318,6 +329,7 @@ def _export(args: argparse.Namespace) -> int:
             columns=args.columns,
             profile=args.profile,
             smooth=args.smooth,
+            stance_levels=args.stance_levels,
         )
     )
     return 0
@@ -326,7 +338,7 @@ def _export(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     from app.evaluate import format_table, run_evaluate
 
-    rows, problems = run_evaluate(args.paths, smooth=args.smooth)
+    rows, problems = run_evaluate(args.paths, smooth=args.smooth, stance_levels=args.stance_levels)
     print(format_table(rows))
     for problem in problems:
         print(f"footnav: skipped: {problem}", file=sys.stderr)

@@ -46,12 +46,12 @@ class Evaluation:
         return 100.0 * self.loop_3d_m / self.distance_m
 
 
-def evaluate_file(path: Path, smooth: bool = False) -> Evaluation:
-    """Navigate one recording and measure it."""
+def evaluate_file(path: Path, smooth: bool = False, stance_levels: bool = True) -> Evaluation:
+    """Navigate one recording and measure it (with the stance height levels unless told not to)."""
     rec = load_recording(path)
     if rec.gt_pos_m is None and not rec.closed_loop:
         raise FootnavError(f"{path}: no ground truth and not a known closed loop; nothing to measure against")
-    nav, stats = navigate_recording(rec, smooth=smooth)
+    nav, stats = navigate_recording(rec, smooth=smooth, stance_levels=stance_levels)
     est = nav.pos_n_m
     skipped = stats.samples_before_alignment
     if rec.gt_pos_m is not None:
@@ -135,7 +135,9 @@ def format_table(rows: list[Evaluation]) -> str:
     return "\n".join(lines)
 
 
-def run_evaluate(paths: list[Path], smooth: bool = False) -> tuple[list[Evaluation], list[str]]:
+def run_evaluate(
+    paths: list[Path], smooth: bool = False, stance_levels: bool = True
+) -> tuple[list[Evaluation], list[str]]:
     """Evaluate every recording found; returns the rows and one-line problems (files that failed)."""
     files = find_recordings(paths)
     if not files:
@@ -145,7 +147,7 @@ def run_evaluate(paths: list[Path], smooth: bool = False) -> tuple[list[Evaluati
     bar = ProgressBar(len(files), "evaluate")
     for f in files:
         try:
-            rows.append(evaluate_file(f, smooth))
+            rows.append(evaluate_file(f, smooth, stance_levels))
         except FootnavError as exc:
             problems.append(str(exc))
         bar.step(f.name)

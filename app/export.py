@@ -44,9 +44,10 @@ EXPORT_COLUMNS = (
 
 
 def navigate_recording(
-    rec: Recording, profile: str | None = None, smooth: bool = False
+    rec: Recording, profile: str | None = None, smooth: bool = False, stance_levels: bool = True
 ) -> tuple[NavBatch, NavStats]:
-    """Run the navigator (and the smoother when asked) over a whole recording.
+    """Run the navigator (and the smoother when asked) over a whole recording, with the stance height
+    levels unless ``stance_levels`` is False (``pipeline.stance_levels``).
 
     The gyroscope's saturated stretches are reconstructed first (``pipeline.saturation``: this needs
     the whole recording, so it happens here and not in the live navigator).
@@ -54,7 +55,7 @@ def navigate_recording(
     Raises:
         FootnavError: the recording never stands still, so it cannot be aligned.
     """
-    config = NavConfig(profile=get_profile(profile or rec.profile))
+    config = NavConfig(profile=get_profile(profile or rec.profile), stance_levels=stance_levels)
     gyr, _ = reconstruct_saturated_rates(rec.t_s, rec.gyr_b_radps)
     if smooth:
         from pipeline.smoother import smooth_recording
@@ -99,11 +100,19 @@ def write_track_csv(nav: NavBatch, path: Path) -> None:
 
 
 def run_export(
-    source: Path, out: Path, *, fmt: str | None, columns: str | None, profile: str | None, smooth: bool
+    source: Path,
+    out: Path,
+    *,
+    fmt: str | None,
+    columns: str | None,
+    profile: str | None,
+    smooth: bool,
+    stance_levels: bool = True,
 ) -> str:
     """Load, navigate and write; returns a one-line summary."""
     if _is_capture(source):
-        given = [name for name, v in (("--format", fmt), ("--columns", columns), ("--profile", profile)) if v]
+        options = (("--format", fmt), ("--columns", columns), ("--profile", profile))
+        given = [name for name, v in options if v] + ([] if stance_levels else ["--no-stance-levels"])
         if given:
             raise FootnavError(
                 f"{source} is a footnav capture, exported with the settings it was recorded with; "
@@ -116,7 +125,7 @@ def run_export(
             )
         return export_capture(source, out)
     rec = load_recording(source, fmt, CsvMapping.parse(columns) if columns else None)
-    nav, stats = navigate_recording(rec, profile, smooth)
+    nav, stats = navigate_recording(rec, profile, smooth, stance_levels)
     write_track_csv(nav, out)
     skipped = (
         f", {stats.samples_before_alignment} samples before the first still period not navigated"
