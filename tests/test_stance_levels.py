@@ -250,3 +250,25 @@ def test_smoothing_does_not_depend_on_where_segments_cut_short_stances(shared_da
     assert whole is not None and cut is not None
     np.testing.assert_array_equal(cut.pos_n_m, whole.pos_n_m)
     np.testing.assert_array_equal(cut.cov_pos_yaw, whole.cov_pos_yaw)
+
+
+@pytest.mark.parametrize(
+    ("rise_m", "swing_sigma_m", "kept_at_least", "kept_at_most"),
+    [(0.06, 0.01, 0.99, 1.01), (0.04, 0.005, 0.85, 0.95), (0.02, 0.005, 0.4, 0.6), (0.01, 0.01, 0.0, 0.05)],
+)
+def test_a_ramp_is_kept_or_taken_for_drift(
+    rise_m: float, swing_sigma_m: float, kept_at_least: float, kept_at_most: float
+) -> None:
+    """The documented limit: 25 strides up a ramp, each stride's height measured exactly but with the
+    filter's height uncertainty growing by ``swing_sigma_m`` in the swing. A rise over 5 cm per stride
+    starts a new level every stride and is kept; a smaller one is pulled towards the last level by
+    each update, in part (a new level once the pull falls behind by 5 cm), and 1 cm per stride with
+    1 cm of swing uncertainty is removed almost whole (README, Accuracy)."""
+    levels = StanceLevels(StanceLevelParams())
+    x, P = _initial()
+    P[:] = np.eye(eskf.N_STATE) * 1e-6
+    for _ in range(25):
+        x[2] += rise_m
+        P[2, 2] += swing_sigma_m**2
+        x, P, _ = levels.stance_update(x, P)
+    assert kept_at_least * 25 * rise_m <= x[2] <= kept_at_most * 25 * rise_m
