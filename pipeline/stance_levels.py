@@ -52,6 +52,10 @@ F64 = NDArray[np.float64]
 LEVEL_STATES = 8
 """Floor levels kept as states of the filter by default (the most recently stood on)."""
 
+MAX_LEVELS = 256
+"""Floor levels remembered; past this the one stood on longest ago is forgotten (a walk whose height
+drifts more than ``same_level_m`` per stride, as a fast run can, makes a level at every stance)."""
+
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
 def height_update(x: F64, P: F64, level: int, z_level_m: float, r_m2: float, work: F64) -> None:
@@ -202,21 +206,34 @@ class StanceLevels:
         self.counts.new_levels += 1
         self.levels_z_m.append(float(x[2]))
         self._used.append(self._stance_no)
+        self._state.append(-1)
         self._ref = len(self.levels_z_m) - 1
+        if len(self.levels_z_m) > MAX_LEVELS:
+            self._forget_oldest()
         if self.params.level_states == 0:
-            self._state.append(-1)
             return x, P
         i = self._free_state(P)
         if i >= P.shape[0]:
             x_grown, P_grown = np.zeros(x.shape[0] + 1), np.zeros((P.shape[0] + 1, P.shape[1] + 1))
             x_grown[:-1], P_grown[:-1, :-1] = x, P
             x, P = x_grown, P_grown
-        self._state.append(i)
+        self._state[self._ref] = i
         x[i + 1] = x[2]
         P[i, :] = P[P0 + 2, :]
         P[:, i] = P[:, P0 + 2]
         P[i, i] = P[P0 + 2, P0 + 2] + self.params.new_level_sigma_m**2
         return x, P
+
+    def _forget_oldest(self) -> None:
+        """Forget the level stood on longest ago that is not a state (nor the start floor or the
+        reference)."""
+        old = [k for k in range(1, len(self.levels_z_m)) if self._state[k] < 0 and k != self._ref]
+        if not old:
+            return
+        k = min(old, key=lambda k: self._used[k])
+        del self.levels_z_m[k], self._state[k], self._used[k]
+        if self._ref > k:
+            self._ref -= 1
 
     def _free_state(self, P: F64) -> int:
         """An error-state index for a new level: an unused one, one more (up to ``level_states``),

@@ -22,7 +22,13 @@ from pipeline.navigator import NavConfig, Navigator, navigate
 from pipeline.profiles import get_profile
 from pipeline.samples import ImuBatch
 from pipeline.smoother import smooth_recording
-from pipeline.stance_levels import StanceLevelParams, StanceLevels, height_update, stance_update_points
+from pipeline.stance_levels import (
+    MAX_LEVELS,
+    StanceLevelParams,
+    StanceLevels,
+    height_update,
+    stance_update_points,
+)
 
 
 def _stance_height_errors(path: str, seed: int, levels: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -272,3 +278,19 @@ def test_a_ramp_is_kept_or_taken_for_drift(
         P[2, 2] += swing_sigma_m**2
         x, P, _ = levels.stance_update(x, P)
     assert kept_at_least * 25 * rise_m <= x[2] <= kept_at_most * 25 * rise_m
+
+
+def test_levels_remembered_are_bounded() -> None:
+    """A walk that makes a level at every stance (height drifting over 5 cm a stride) keeps at most
+    ``MAX_LEVELS``: the start floor, the states and the recent ones stay, the oldest are forgotten."""
+    levels = StanceLevels(StanceLevelParams(level_states=2))
+    x, P = _initial()
+    for k in range(1, MAX_LEVELS + 60):
+        x, P, _ = _stand(levels, x, P, 0.17 * k)
+    assert len(levels.levels_z_m) == MAX_LEVELS and levels.levels_z_m[0] == 0.0
+    assert P.shape == (eskf.N_STATE + 2, eskf.N_STATE + 2)
+    assert levels.floor_z_m == pytest.approx(0.17 * (MAX_LEVELS + 59))
+    x, P, z = _stand(levels, x, P, 0.17 * (MAX_LEVELS + 50) + 0.01)  # a recent level: returned to
+    assert z == pytest.approx(0.17 * (MAX_LEVELS + 50), abs=1e-9)
+    x, P, z = _stand(levels, x, P, 0.17 * 5)  # an early one: forgotten, so a new level
+    assert math.isnan(z)
