@@ -335,3 +335,7 @@ def apply_capture_settings(cfg: Config, nav_json: dict[str, Any], source: str) -
             for key, value in table.items():
                 if f"{section}.{key}" in cfg.values:
                     cfg.set(f"{section}.{key}", value, source)
+    filter_table = nav_json.get("filter")
+    if isinstance(filter_table, dict) and "stance_levels" not in filter_table:
+        # recorded before the stance height levels existed: its live estimates had none
+        cfg.set("filter.stance_levels", False, f"{source} (recorded before stance levels)")

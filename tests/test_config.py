@@ -69,6 +69,20 @@ def test_tof_mounting_from_the_file_and_through_a_capture_header(tmp_path: Path)
         cfg.tof_config("both")
 
 
+def test_a_capture_recorded_before_the_stance_levels_replays_without_them() -> None:
+    """Its live estimates had no stance levels, so its replay has none either (replay equals live)."""
+    recorded = defaults().to_json()
+    assert recorded["filter"]["stance_levels"] is True
+    del recorded["filter"]["stance_levels"]
+    replay = defaults()
+    apply_capture_settings(replay, recorded, "capture old.mcap")
+    assert replay.nav_config().stance_levels is False
+    assert "before stance levels" in replay.source("filter.stance_levels")
+    now = defaults()
+    apply_capture_settings(now, defaults().to_json(), "capture new.mcap")
+    assert now.nav_config().stance_levels is True
+
+
 @pytest.mark.parametrize(
     ("text", "needle"),
     [
