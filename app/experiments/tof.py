@@ -6,8 +6,8 @@ of a unit whose gyroscope had only its bias calibrated, as the platform's: ``gyr
 in :data:`device.emulator.imu_errors.AXIS_ERRORS`; ``--axis-errors none`` for the noise and biases
 alone) and the emulated ToF sensors (``device.emulator.tof_sensors``). With no axis errors, zero-
 velocity updates alone lose only millimetres of height in 70 s (0.1-2.7 cm RMS at footfalls, seeds
-1-8), far less than on real recordings (README "Accuracy": 0.25 m on the x-io loop in 42 s, 0.77 m
-on the OpenShoe loop); with the gyroscope's datasheet scale and cross-axis tolerances they lose
+1-8), far less than on real recordings with ZUPT alone (README "Accuracy": 0.25 m on the x-io loop
+in 42 s, 0.77 m on the OpenShoe loop); with the gyroscope's datasheet scale and cross-axis tolerances they lose
 2.5-124 cm, the real recordings' order. The same recording is navigated twice by the same
 navigator: with the ToF channel, and with it removed (zero-velocity updates alone), so the gain is
 measured side by side. Figures against the emulator's ground truth:
