@@ -26,7 +26,7 @@ from pipeline.dual_imu_eskf import DualEskfConfig, DualEskfStream, DualEskfTrack
 from pipeline.eskf import sample_intervals
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavStats, zupt_ratio
-from pipeline.stance_levels import StanceLevelParams, StanceLevels, stance_update_points
+from pipeline.stance_levels import StanceLevelParams, StanceLevels
 
 F64 = NDArray[np.float64]
 
@@ -100,8 +100,7 @@ class DualNavigator:
         biases, constraint residuals), for sinks that show more than the NavBatch holds."""
         self._pending: list[tuple[NDArray[Any], ...]] = []  # (t, acc, gyr, host, stat, threshold, still)
         self._t_last = math.nan
-        self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels, level_states=0))
-        self._stance_samples = 0
+        self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels, level_states=0), rate_hz)
 
     @property
     def messages(self) -> tuple[str, ...]:
@@ -178,10 +177,8 @@ class DualNavigator:
         self._t_last = float(t[-1])
         ratio = zupt_ratio(stat, threshold)
         f = self.filter
-        after = max(1, round(self.levels.params.update_after_s * self.rate_hz))
-        points, self._stance_samples = stance_update_points(still, self._stance_samples, after)
         parts, a = [], 0
-        for b in [*points, None]:  # None: the rest of the batch, with no update after it
+        for b in [*self.levels.update_points(still), None]:  # None: the rest of the batch, with no update after it
             end = t.shape[0] if b is None else b
             if end > a:
                 parts.append(f.step(t[a:end], acc[a:end], gyr[a:end], still[a:end], dt[a:end], ratio[a:end]))

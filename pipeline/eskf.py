@@ -330,6 +330,37 @@ def inject(x: F64, P: F64, dx: F64) -> None:
     inject_attitude_and_reset(x, P, dx[TH0], dx[TH0 + 1], dx[TH0 + 2])
 
 
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def update1(x: F64, P: F64, u: F64, s: float, y: float, dx: F64) -> None:
+    """One scalar measurement update of ``x`` (n + 1,) and ``P`` (n, n) in place, given u = P Hᵀ (n,),
+    S = H u + r and the innovation y: the Joseph form expanded for one row, P ← P − K uᵀ − u Kᵀ +
+    K S Kᵀ with K = u / S, on one triangle, then injection and reset of δx = K y (``dx`` (n,) scratch
+    receives it). Shared by the ToF (``pipeline.tof_update``) and stance height
+    (``pipeline.stance_levels``) updates."""  # pragma: no cover
+    n = P.shape[0]
+    for i in range(n):
+        ki = u[i] / s
+        for j in range(i, n):
+            kj = u[j] / s
+            P[i, j] = P[i, j] - ki * u[j] - u[i] * kj + ki * s * kj
+    for i in range(n):
+        for j in range(i):
+            P[i, j] = P[j, i]
+    for i in range(n):
+        dx[i] = u[i] / s * y
+    inject(x, P, dx)
+
+
+def clone_height(x: F64, P: F64, i: int, extra_var_m2: float) -> None:
+    """Stochastic cloning of the height (Roumeliotis and Burdick, ICRA 2002): the constant error state
+    ``i`` (nominal x[i + 1]) becomes a copy of δp_z, its row and column of ``P`` those of δp_z and its
+    variance that of δp_z plus ``extra_var_m2`` (a floor level placed where the IMU rests)."""
+    x[i + 1] = x[P0 + 2]
+    P[i, :] = P[P0 + 2, :]
+    P[:, i] = P[:, P0 + 2]
+    P[i, i] = P[P0 + 2, P0 + 2] + extra_var_m2
+
+
 _POS_YAW = (P0, P0 + 1, P0 + 2, TH0 + 2)  # error-state indices of x, y, z and the heading
 
 

@@ -27,7 +27,7 @@ from pipeline.height_detector import HeightStanceDetector
 from pipeline.nav_types import NavBatch
 from pipeline.profiles import UnitProfile, get_profile
 from pipeline.samples import ImuBatch
-from pipeline.stance_levels import StanceLevelParams, StanceLevels, stance_update_points
+from pipeline.stance_levels import StanceLevelParams, StanceLevels
 from pipeline.tof_aiding import RangeBatch, RangeOutputs, TofAiding, TofConfig
 
 F64 = NDArray[np.float64]
@@ -189,9 +189,7 @@ class Navigator:
         self._par = np.zeros(eskf.N_PAR)
         self._t_last = math.nan
         self._counters = np.zeros(eskf.N_CNT, dtype=np.int64)
-        self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels))
-        self._stance_samples = 0
-        """Samples of the stance in progress at the end of the last batch (0 in swing)."""
+        self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels), rate_hz)
         self.level_updates: list[tuple[int, float]] | None = None
         """When a list: each stance height update, as (sample index since alignment, level height)."""
 
@@ -344,11 +342,9 @@ class Navigator:
         the stance before (the start floor, z = 0, without the constraint)."""
         assert self._x is not None
         n = still.shape[0]
-        after = max(1, round(self.levels.params.update_after_s * self.rate_hz))
-        points, self._stance_samples = stance_update_points(still, self._stance_samples, after)
         floor = np.empty(n)
         a = 0
-        for b in [*points, None]:  # None: the rest of the batch, with no update after it
+        for b in [*self.levels.update_points(still), None]:  # None: the rest of the batch, with no update after it
             end = n if b is None else b
             floor[a:end] = self.levels.floor_z_m
             if end > a:

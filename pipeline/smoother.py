@@ -351,7 +351,7 @@ class _CheckpointingNavigator(Navigator):
     def __init__(self, config: NavConfig, rate_hz: float, segment_samples: int) -> None:
         super().__init__(config, rate_hz)
         # the stance levels as constants, so that the updates are of the 15 states the passes store
-        self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels, level_states=0))
+        self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels, level_states=0), rate_hz)
         self.level_updates = []
         self.segment_samples = segment_samples
         self.checkpoints: list[tuple[int, F64, F64, float, int]] = []

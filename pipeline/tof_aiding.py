@@ -94,7 +94,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline import tof_update as tu
-from pipeline.eskf import N_STATE
+from pipeline.eskf import N_STATE, clone_height
 from pipeline.height_detector import HeightDetectorParams
 
 F64 = NDArray[np.float64]
@@ -486,10 +486,7 @@ class TofAiding:
         if P.shape[0] > N_STATE:
             i = self._free_level_state(P)
             self._level_state[-1] = i
-            x[i + 1] = x[2]
-            P[i, :] = P[2, :]
-            P[:, i] = P[:, 2]
-            P[i, i] = P[2, 2] + self.config.new_level_sigma_m**2
+            clone_height(x, P, i, self.config.new_level_sigma_m**2)
         return len(self.levels_z_m) - 1
 
     def _free_level_state(self, P: F64) -> int:

@@ -39,7 +39,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pipeline.eskf import TH0, inject
+from pipeline.eskf import TH0, update1
 
 F64 = NDArray[np.float64]
 
@@ -139,15 +139,4 @@ def tof_update(
     res[RES_CODE] = USED
     if not apply:
         return
-    # Joseph form, expanded for a scalar measurement: P − K uᵀ − u Kᵀ + K S Kᵀ, K = u / S
-    for i in range(n):
-        ki = u[i] / s
-        for j in range(i, n):
-            kj = u[j] / s
-            P[i, j] = P[i, j] - ki * u[j] - u[i] * kj + ki * s * kj
-    for i in range(n):
-        for j in range(i):
-            P[i, j] = P[j, i]
-    for i in range(n):
-        H[i] = u[i] / s * y  # H is no longer needed: it holds δx = K y
-    inject(x, P, H)
+    update1(x, P, u, s, y, H)  # H is no longer needed: it receives δx = K y

@@ -119,7 +119,7 @@ def _initial() -> tuple[np.ndarray, np.ndarray]:
 def test_levels_new_return_and_bounded() -> None:
     """A riser starts a level (no update), small changes are the same level, a known level is
     returned to, and at most ``level_states`` levels are states; the oldest leaves and keeps its height."""
-    levels = StanceLevels(StanceLevelParams(level_states=2))
+    levels = StanceLevels(StanceLevelParams(level_states=2), 1000.0)
     x, P = _initial()
     x, P, z = _stand(levels, x, P, 0.01)
     assert z == 0.0 and abs(x[2]) < 0.01  # pulled towards the start floor
@@ -139,7 +139,7 @@ def test_levels_new_return_and_bounded() -> None:
 
 
 def test_a_state_that_is_not_finite_is_not_used() -> None:
-    levels = StanceLevels(StanceLevelParams())
+    levels = StanceLevels(StanceLevelParams(), 1000.0)
     x, P = _initial()
     x[2] = math.nan
     x2, _, z = levels.stance_update(x, P)
@@ -147,7 +147,7 @@ def test_a_state_that_is_not_finite_is_not_used() -> None:
 
 
 def test_off_is_the_inertial_only_filter() -> None:
-    levels = StanceLevels(StanceLevelParams(use=False))
+    levels = StanceLevels(StanceLevelParams(use=False), 1000.0)
     x, P = _initial()
     x[2] = 0.04
     x2, P2, z = levels.stance_update(x.copy(), P.copy())
@@ -209,7 +209,7 @@ def test_smoother_applies_the_levels_as_its_forward_filter_does() -> None:
     truth, acc, gyr = _stairs_with_axis_errors()
     cfg = NavConfig(profile=get_profile("mpu6500x4"))
     nav = Navigator(cfg, truth.rate_hz)
-    nav.levels = StanceLevels(StanceLevelParams(level_states=0))
+    nav.levels = StanceLevels(StanceLevelParams(level_states=0), truth.rate_hz)
     causal = nav.process(_batch(truth.t_s, acc, gyr, slice(None)))
     smoothed, _ = smooth_recording(truth.t_s, acc, gyr, truth.rate_hz, cfg)
     off, _ = smooth_recording(truth.t_s, acc, gyr, truth.rate_hz, NavConfig(profile=cfg.profile, stance_levels=False))
@@ -270,7 +270,7 @@ def test_a_ramp_is_kept_or_taken_for_drift(
     starts a new level every stride and is kept; a smaller one is pulled towards the last level by
     each update, in part (a new level once the pull falls behind by 5 cm), and 1 cm per stride with
     1 cm of swing uncertainty is removed almost whole (README, Accuracy)."""
-    levels = StanceLevels(StanceLevelParams())
+    levels = StanceLevels(StanceLevelParams(), 1000.0)
     x, P = _initial()
     P[:] = np.eye(eskf.N_STATE) * 1e-6
     for _ in range(25):
@@ -283,7 +283,7 @@ def test_a_ramp_is_kept_or_taken_for_drift(
 def test_levels_remembered_are_bounded() -> None:
     """A walk that makes a level at every stance (height drifting over 5 cm a stride) keeps at most
     ``MAX_LEVELS``: the start floor, the states and the recent ones stay, the oldest are forgotten."""
-    levels = StanceLevels(StanceLevelParams(level_states=2))
+    levels = StanceLevels(StanceLevelParams(level_states=2), 1000.0)
     x, P = _initial()
     for k in range(1, MAX_LEVELS + 60):
         x, P, _ = _stand(levels, x, P, 0.17 * k)
