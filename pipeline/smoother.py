@@ -58,6 +58,8 @@ solution is written in place): measured peak 350 B per sample for both, 210 MB f
 
 from __future__ import annotations
 
+import bisect
+
 import math
 
 import numpy as np
@@ -119,8 +121,6 @@ def _storing_pass(
     stance: NDArray[np.bool_],
     zupt_ratio: F64,
     par: F64,
-    level_z_m: F64,
-    level_r_m2: float,
     xf: F64,
     Pf: F64,
     xp: F64,
@@ -128,9 +128,8 @@ def _storing_pass(
     fn: F64,
     Rm: F64,
 ) -> None:
-    """The causal filter over a segment (``run_filter``'s steps, then the navigator's stance height
-    update where ``level_z_m`` (n,) holds a level's height, NaN elsewhere, with noise ``level_r_m2``),
-    keeping what the smoother needs.
+    """The causal filter over a segment (``run_filter``'s steps), keeping what the smoother needs.
+    The stance height updates are applied between calls (``smooth_recording``).
 
     For sample j: ``xp[j]``, ``Pp[j]`` nominal state and covariance after the propagation (before any
     update), ``xf[j]``, ``Pf[j]`` after the updates, ``fn[j]``, ``Rm[j]`` and ``dt_s[j]`` the blocks of
@@ -149,7 +148,6 @@ def _storing_pass(
         or Pp.shape[0] < n
         or fn.shape[0] < n
         or Rm.shape[0] < n
-        or level_z_m.shape[0] != n
     ):
         raise ValueError("_storing_pass: inconsistent array shapes")
     counters = np.zeros(N_CNT, dtype=np.int64)
@@ -176,13 +174,25 @@ def _storing_pass(
             fn[k, 0] = math.nan
         if stance[k] and not bad:
             _correct(x, P, gyr_b_radps, zupt_ratio, k, par, y, work, counters)
-        if math.isfinite(level_z_m[k]):
-            height_update(x, P, -1, level_z_m[k], level_r_m2, work)
         for i in range(16):
             xf[k, i] = x[i]
         for i in range(N_STATE):
             for j in range(N_STATE):
                 Pf[k, i, j] = P[i, j]
+
+
+def _storing_segment(
+    x: F64, P: F64, lo: int, hi: int, a: int, acc: F64, gyr: F64, dt: F64, stance: NDArray[np.bool_],
+    ratio: F64, par: F64, xf: F64, Pf: F64, xp: F64, Pp: F64, fn: F64, Rm: F64,
+) -> None:  # fmt: skip
+    """:func:`_storing_pass` over samples lo..hi−1 of the recording, into the buffers of the segment
+    that starts at sample ``a``."""
+    if hi > lo:
+        b = slice(lo - a, None)
+        _storing_pass(
+            x, P, acc[lo:hi], gyr[lo:hi], dt[lo:hi], stance[lo:hi], ratio[lo:hi], par,
+            xf[b], Pf[b], xp[b], Pp[b], fn[b], Rm[b],
+        )  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
@@ -413,10 +423,10 @@ def smooth_recording(
     gyr = np.ascontiguousarray(batch.gyr_b_radps, dtype=np.float64)
     stance = np.ascontiguousarray(still)
     n = len(batch)
-    level_z = np.full(n, np.nan)
-    for k, z in nav.level_updates or ():
-        level_z[k] = z
+    level_updates = nav.level_updates or []
+    level_at = [k for k, _ in level_updates]
     level_r = nav.levels.params.sigma_m**2
+    work = np.empty((2, eskf.N_STATE))
     t_first = nav.checkpoints[0][3]
     dt = sample_intervals(batch.t_s, t_first, nav.config.dt_max_s)  # as Navigator._run computes it
     floor_z = out.pos_n_m[:, 2] - out.clearance_m  # the floor each clearance is measured from
@@ -436,13 +446,20 @@ def smooth_recording(
         stop = end if is_last else end + 1  # one sample of overlap: the next segment's first
         m = stop - a
         x, P = x0.copy(), P0_.copy()
-        for k, z in (nav.level_updates or [])[done:]:
+        for k, z in level_updates[done:]:
             if k < a:  # due after the previous segment's last sample, applied after this checkpoint
-                height_update(x, P, -1, z, level_r, np.empty((2, eskf.N_STATE)))
-        _storing_pass(
-            x, P, acc[a:stop], gyr[a:stop], dt[a:stop], stance[a:stop], ratio[a:stop], nav._par,
-            level_z[a:stop], level_r, xf, Pf, xp, Pp, fn, Rm,
-        )  # fmt: skip
+                height_update(x, P, -1, z, level_r, work)
+        # the filter from the checkpoint, split after each stance height update's sample: the update
+        # runs here, from Python, as in the navigator, so both run the same compiled code (inlined
+        # into the pass, LLVM fused its arithmetic differently once the pass came from numba's cache)
+        lo = a
+        for j in range(bisect.bisect_left(level_at, a), bisect.bisect_left(level_at, stop)):
+            k, z = level_updates[j]
+            _storing_segment(x, P, lo, k + 1, a, acc, gyr, dt, stance, ratio, nav._par, xf, Pf, xp, Pp, fn, Rm)
+            height_update(x, P, -1, z, level_r, work)
+            xf[k - a], Pf[k - a] = x, P
+            lo = k + 1
+        _storing_segment(x, P, lo, stop, a, acc, gyr, dt, stance, ratio, nav._par, xf, Pf, xp, Pp, fn, Rm)
         if is_last:
             ds[:] = 0.0
             Ps[:] = Pf[m - 1]

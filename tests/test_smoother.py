@@ -98,7 +98,7 @@ def test_storing_pass_reproduces_the_causal_filter(walk) -> None:  # type: ignor
     eskf.run_filter(x, P, acc, gyr, dt, stance, ratio, par, *out, counters)
     assert counters[eskf.CNT_BAD_SAMPLE] == 5 and counters[eskf.CNT_BAD_DT] == 1 and counters[eskf.CNT_GAP] == 1
     xf, Pf, _, _, fn, _ = bufs = _buffers(n)
-    _storing_pass(x2, P2, acc, gyr, dt, stance, ratio, par, np.full(n, np.nan), 0.0, *bufs)
+    _storing_pass(x2, P2, acc, gyr, dt, stance, ratio, par, *bufs)
     np.testing.assert_array_equal(xf[:, :3], out[0])
     np.testing.assert_array_equal(xf[:, 3:6], out[1])
     np.testing.assert_array_equal(xf[:, 6:10], out[2])
@@ -120,7 +120,7 @@ def test_backward_pass_matches_a_dense_rts_smoother(walk) -> None:  # type: igno
     eskf.run_filter(x, P, acc[:a], gyr[:a], dt[:a], stance[:a], ratio[:a], par, pos, vel, quat, cov, counters)
     xf, Pf, xp, Pp, fn, Rm = bufs = _buffers(n)
     sl = slice(a, a + n)
-    _storing_pass(x, P, acc[sl], gyr[sl], dt[sl], stance[sl], ratio[sl], par, np.full(n, np.nan), 0.0, *bufs)
+    _storing_pass(x, P, acc[sl], gyr[sl], dt[sl], stance[sl], ratio[sl], par, *bufs)
     assert stance[sl].any() and not stance[sl].all()
     ds, Ps, xs = np.zeros(15), Pf[-1].copy(), xf[-1].copy()
     out = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
