@@ -17,10 +17,11 @@ causal result.
 **Backward** (Rauch, Tung, Striebel, AIAA J. 3(8), 1965), over the segments from the last one: each
 segment is filtered again from its checkpoint by ``_storing_pass``, which runs ``run_filter``'s step
 operation for operation (``eskf._predict``, ``eskf._correct``; ``tests/test_smoother.py`` checks that
-it reproduces the causal states and covariances bit for bit) and keeps per sample what the backward
-pass needs: the filtered nominal x̂_k and P_k
-(after the updates), the predicted nominal x̂⁻_k and P⁻_k, and the propagation Jacobian F_k as
-(f_n, R, dt) (``eskf._propagate_cov``'s blocks). Then, for k from the end down:
+it reproduces the causal states and covariances bit for bit; the stance height updates run between
+its calls, from Python as in the navigator, so that both run the same compiled update) and keeps per
+sample what the backward pass needs: the filtered nominal x̂_k and P_k (after the updates), the
+predicted nominal x̂⁻_k and P⁻_k, and the propagation Jacobian F_k as (f_n, R, dt)
+(``eskf._propagate_cov``'s blocks). Then, for k from the end down:
 
     C_k      = P_k F_{k+1}ᵀ (P⁻_{k+1})⁻¹
     δ⁻_{k+1} = x^s_{k+1} ⊖ x̂⁻_{k+1}                   smoothed error against the *predicted* nominal
@@ -59,7 +60,6 @@ solution is written in place): measured peak 350 B per sample for both, 210 MB f
 from __future__ import annotations
 
 import bisect
-
 import math
 
 import numpy as np
