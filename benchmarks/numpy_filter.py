@@ -101,6 +101,19 @@ def _update(x: F64, P: F64, H: F64, y: F64, R: F64) -> tuple[F64, F64]:
     return x, 0.5 * (P + P.T)
 
 
+def _zaru(
+    x: F64, P: F64, gyr_b_radps: F64, par: F64, H_bg: F64, R_zaru: F64, counters: NDArray[np.int64]
+) -> tuple[F64, F64]:
+    """The χ²-gated zero-angular-rate update."""
+    y = gyr_b_radps - x[13:16]
+    S = H_bg @ P @ H_bg.T + par[eskf.PAR_ZARU_GATE_SIG] ** 2 * _I3  # the gate's noise (pipeline.eskf)
+    if float(y @ np.linalg.solve(S, y)) < par[eskf.PAR_ZARU_GATE]:
+        counters[eskf.CNT_ZARU] += 1
+        return _update(x, P, H_bg, y, R_zaru)
+    counters[eskf.CNT_ZARU_REJECTED] += 1
+    return x, P
+
+
 def run_filter_numpy(
     x: F64,
     P: F64,
@@ -161,21 +174,23 @@ def run_filter_numpy(
             Q = np.diag(np.repeat(q_block, 3))
             P = F @ P @ F.T + Q
             P = 0.5 * (P + P.T)
+        counters[eskf.FLAG_LAST_REJECTED] = 0
         if stance[k] and not bad:
             omega = gyr_b_radps[k] - x[13:16]
             r_zupt = par[eskf.PAR_ZUPT] ** 2 + par[eskf.PAR_ROLL_LEVER] ** 2 * float(omega @ omega)
             # vertical: + σ_T² T/γ, T/γ clamped to [0, 1] (NaN: 1)
             rho = float(np.clip(np.nan_to_num(zupt_ratio[k], nan=1.0), 0.0, 1.0))
             r_v = r_zupt + par[eskf.PAR_ZUPT_VERT_STAT] ** 2 * rho
-            x, P = _update(x, P, H_v, -x[3:6], np.diag([r_zupt, r_zupt, r_v]))
-            counters[eskf.CNT_UPDATES] += 1
-            y = gyr_b_radps[k] - x[13:16]
-            S = H_bg @ P @ H_bg.T + par[eskf.PAR_ZARU_GATE_SIG] ** 2 * _I3  # the gate's noise (pipeline.eskf)
-            if float(y @ np.linalg.solve(S, y)) < par[eskf.PAR_ZARU_GATE]:
-                x, P = _update(x, P, H_bg, y, R_zaru)
-                counters[eskf.CNT_ZARU] += 1
+            R_v = np.diag([r_zupt, r_zupt, r_v])
+            unsure = not (zupt_ratio[k] <= par[eskf.PAR_ZUPT_GATE_RATIO])
+            v = x[3:6]
+            if unsure and float(v @ np.linalg.solve(H_v @ P @ H_v.T + R_v, v)) > par[eskf.PAR_ZUPT_GATE]:
+                counters[eskf.CNT_ZUPT_REJECTED] += 1  # the foot is moving: no update at this sample
+                counters[eskf.FLAG_LAST_REJECTED] = 1
             else:
-                counters[eskf.CNT_ZARU_REJECTED] += 1
+                x, P = _update(x, P, H_v, -x[3:6], R_v)
+                counters[eskf.CNT_UPDATES] += 1
+                x, P = _zaru(x, P, gyr_b_radps[k], par, H_bg, R_zaru, counters)
         pos[k], vel[k], quat[k] = x[0:3], x[3:6], x[6:10]
         pos_cov[k] = P[np.ix_(_POS_YAW, _POS_YAW)]
     return FilterRun(pos, vel, quat, pos_cov, counters, x, P)

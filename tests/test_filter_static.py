@@ -160,3 +160,45 @@ def test_strapdown_step_is_second_order_on_exact_signals() -> None:
         errors.append(float(np.linalg.norm(pos[-1] - truth.pos_n_m[-1])))
     coarse, fine = errors
     assert fine < coarse / 8.0 and fine < 2e-3
+
+
+def _moving_filter(speed_mps: float):  # type: ignore[no-untyped-def]
+    """A filter aligned on a still unit that the nominal state says moves at ``speed_mps`` along x,
+    its velocity known to 1 cm/s: one still sample follows."""
+    from pipeline.navigator import filter_parameters, initial_error_sigmas
+    from pipeline.profiles import get_profile
+
+    prof = get_profile("mpu6500x4")
+    _, acc, gyr = _still(1, 0.0, 0.0, np.zeros(3))
+    x = np.zeros(16)
+    x[3], x[6] = speed_mps, 1.0
+    P = np.diag(initial_error_sigmas(NavConfig(profile=prof), prof) ** 2)
+    P[3:6, 3:6] = np.eye(3) * 0.01**2
+    par = filter_parameters(prof, RATE_HZ, 9.80665, 0.05)
+    return x, P, acc, gyr, par
+
+
+@pytest.mark.parametrize(("ratio", "applied"), [(0.9, False), (np.nan, False), (0.5, True), (0.1, True)])
+def test_zero_velocity_sample_of_a_moving_foot(ratio: float, applied: bool) -> None:
+    """A stance sample the detector is unsure of (T/γ above 0.5, or from another source) while the filter
+    knows the foot moves at 1.9 m/s (the PyShoe mid-swing "stance" of ``pipeline.eskf``) is skipped and
+    counted; one the detector is sure of is applied however far the filter's velocity is from zero."""
+    x, P, acc, gyr, par = _moving_filter(1.9)
+    counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+    out = np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 4)), np.empty((1, 4, 4))
+    eskf.run_filter(x, P, acc, gyr, np.array([1e-3]), np.array([True]), np.array([ratio]), par, *out, counters)
+    assert counters[eskf.CNT_ZUPT_REJECTED] == (0 if applied else 1)
+    assert counters[eskf.CNT_UPDATES] == (1 if applied else 0)
+    assert counters[eskf.FLAG_LAST_REJECTED] == (0 if applied else 1)
+    # applied: with the velocity's σ equal to the update's noise, one update halves it
+    assert (x[3] < 0.6 * 1.9) if applied else (x[3] == pytest.approx(1.9, abs=1e-3))
+
+
+def test_zero_velocity_sample_near_rest_is_applied_when_unsure() -> None:
+    """At the end of a swing the velocity error is centimetres per second: an unsure sample's NIS is far
+    below the gate (10σ), so it is applied."""
+    x, P, acc, gyr, par = _moving_filter(0.05)
+    counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+    out = np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 4)), np.empty((1, 4, 4))
+    eskf.run_filter(x, P, acc, gyr, np.array([1e-3]), np.array([True]), np.array([0.99]), par, *out, counters)
+    assert counters[eskf.CNT_ZUPT_REJECTED] == 0 and counters[eskf.CNT_UPDATES] == 1
