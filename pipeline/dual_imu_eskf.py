@@ -66,7 +66,13 @@ from pipeline.dual_imu_common import (
     still_window,
 )
 from pipeline.eskf import inject_attitude_and_reset, sample_intervals, zupt_vertical_weight
-from pipeline.navigator import DEFAULT_DT_MAX_S, ZARU_GATE_CHI2_3DOF, initial_error_sigmas
+from pipeline.navigator import (
+    DEFAULT_DT_MAX_S,
+    ZARU_GATE_CHI2_3DOF,
+    ZUPT_GATE_NIS,
+    ZUPT_GATE_RATIO,
+    initial_error_sigmas,
+)
 from pipeline.profiles import UnitProfile, get_profile
 from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s, quat_to_mat_into
 
@@ -96,8 +102,10 @@ P0, V0, TH0, BA1, BG1, BA2, BG2 = 0, 3, 6, 9, 12, 15, 18
     PAR_GYR_FS,
     PAR_WDOT_SIGMA,
     PAR_ZUPT_VERT_STAT,
-) = range(19)
-N_PAR = 19
+    PAR_ZUPT_GATE,
+    PAR_ZUPT_GATE_RATIO,
+) = range(21)
+N_PAR = 21
 
 (
     CNT_BAD1,
@@ -108,8 +116,9 @@ N_PAR = 19
     CNT_ZARU_REJECTED,
     CNT_RATE_EQ,
     CNT_FORCE_EQ,
-) = range(8)
-N_CNT = 8
+    CNT_ZUPT_REJECTED,
+) = range(9)
+N_CNT = 9
 COUNTER_NAMES = (
     "imu1_bad_samples",
     "imu2_bad_samples",
@@ -119,9 +128,12 @@ COUNTER_NAMES = (
     "zero_rate_rejected",
     "equal_rate_updates",
     "equal_force_updates",
+    "zero_velocity_rejected",
 )
 
-N_AUX = 10
+N_AUX = 11
+AUX_LAST_REJECTED = 10
+"""aux[10]: 1 when the last sample's zero-velocity update was rejected (its stance gives no level)."""
 RATE_EQ_SAMPLES = 10
 """The equal-rate constraint is applied to the mean rate difference of this many samples."""
 _WDOT_SMOOTHING = 0.2  # exponential smoothing of the backward-difference angular acceleration
@@ -229,7 +241,10 @@ def run_dual_filter(
     """The filter loop over n samples; ``x`` (22,) and ``P`` (21, 21) are updated in place.
 
     ``aux`` (N_AUX,) carries the rest of the state between batches (previous rate, smoothed ω̇, the
-    running equal-rate sum and count), so a stream cut into batches gives the same result as one call.
+    running equal-rate sum and count, whether the last sample's zero-velocity update was rejected), so
+    a stream cut into batches gives the same result as one call. An unsure stance sample whose
+    velocity innovation says the foot is moving is skipped with the rest of that sample's stance
+    updates (the gate of ``pipeline.eskf``).
 
     ``acc``, ``gyr``: (n, 2, 3); ``out_x`` (n, 22) nominal states; ``out_cov`` (n, 3, 3) position
     covariance; ``out_res`` (n, 6) = [equal-rate, equal-force innovations] (NaN where not formed);
@@ -376,6 +391,8 @@ def run_dual_filter(
         else:
             rate_count = 0
             rate_sum[:] = 0.0
+        moving = False
+        aux[AUX_LAST_REJECTED] = 0.0
         if stance[k] and any_ok:
             w2sum = w[0] ** 2 + w[1] ** 2 + w[2] ** 2
             H[:, :] = 0.0
@@ -384,9 +401,16 @@ def run_dual_filter(
                 y[c] = -x[3 + c]
                 r[c] = par[PAR_ZUPT] ** 2 + par[PAR_ROLL_LEVER] ** 2 * w2sum
             r[2] += par[PAR_ZUPT_VERT_STAT] ** 2 * zupt_vertical_weight(zupt_ratio[k])  # soft vertical (eskf)
-            kf_dense.update3(dx, P, H, y, r, work, np.inf)
-            _inject(x, P, dx)
-            counters[CNT_ZUPT] += 1
+            # an unsure sample whose velocity says the foot moves is skipped (pipeline.eskf's gate)
+            gate = np.inf if zupt_ratio[k] <= par[PAR_ZUPT_GATE_RATIO] else par[PAR_ZUPT_GATE]
+            moving = kf_dense.update3(dx, P, H, y, r, work, gate) >= gate
+            if moving:
+                counters[CNT_ZUPT_REJECTED] += 1
+                aux[AUX_LAST_REJECTED] = 1.0
+            else:
+                _inject(x, P, dx)
+                counters[CNT_ZUPT] += 1
+        if stance[k] and any_ok and not moving:
             H[:, :] = 0.0
             for c in range(3):
                 H[c, BG1 + c] = w1
@@ -457,6 +481,8 @@ def dual_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float) -
     par[PAR_ACC_FS] = ACC_FULL_SCALE_MPS2
     par[PAR_GYR_FS] = GYR_FULL_SCALE_RADPS
     par[PAR_ZUPT_VERT_STAT] = profile.zupt_vertical_sigma_mps
+    par[PAR_ZUPT_GATE] = ZUPT_GATE_NIS
+    par[PAR_ZUPT_GATE_RATIO] = ZUPT_GATE_RATIO
     # 1σ of the smoothed backward difference of the averaged rate (white, σ_w² = gyr_white²/2): with
     # e_k = (1 − α) e_{k−1} + α (u_k − u_{k−1})/Δt, Var e = (α/Δt)² σ_w² · 2/(2 − α)
     alpha = _WDOT_SMOOTHING

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from pipeline.detectors import DetectorParams, StreamingDetector
 from pipeline.dual_imu_common import ACC_FULL_SCALE_MPS2, GYR_FULL_SCALE_RADPS
-from pipeline.dual_imu_eskf import DualEskfConfig, DualEskfStream, DualEskfTrack, concat_tracks
+from pipeline.dual_imu_eskf import AUX_LAST_REJECTED, DualEskfConfig, DualEskfStream, DualEskfTrack, concat_tracks
 from pipeline.eskf import sample_intervals
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavStats, zupt_ratio
@@ -182,7 +182,7 @@ class DualNavigator:
             end = t.shape[0] if b is None else b
             if end > a:
                 parts.append(f.step(t[a:end], acc[a:end], gyr[a:end], still[a:end], dt[a:end], ratio[a:end]))
-            if b is not None:
+            if b is not None and not f.aux[AUX_LAST_REJECTED]:  # a stance the filter found moving: no level
                 f.x, f.P, _ = self.levels.stance_update(f.x, f.P)
             a = end
         track = concat_tracks(parts)
@@ -191,7 +191,7 @@ class DualNavigator:
         s = self.stats
         s.samples_out += t.shape[0]
         s.bad_samples = c["both_bad_samples"]
-        s.zero_velocity_updates = c["zero_velocity_updates"]
+        s.zero_velocity_updates, s.zero_velocity_rejected = c["zero_velocity_updates"], c["zero_velocity_rejected"]
         s.zero_rate_updates, s.zero_rate_rejected = c["zero_rate_updates"], c["zero_rate_rejected"]
         return NavBatch(
             t_s=t,

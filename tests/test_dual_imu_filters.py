@@ -208,3 +208,25 @@ def test_footnav_dual_integrates_a_corrupt_time_stamp_gap_as_dt_max() -> None:
     # one mid-swing interval of 50 ms instead of 1 ms costs decimetres, not the 1e16 m of integrating
     # the year (measured 0.83 m largest offset, then held by the zero-velocity updates)
     assert np.max(np.linalg.norm(gapped.pos1_n_m - clean.pos1_n_m, axis=1)) < 2.0
+
+
+@pytest.mark.parametrize(("ratio", "applied"), [(0.9, False), (0.1, True)])
+def test_dual_filter_skips_an_unsure_stance_of_a_moving_foot(ratio: float, applied: bool) -> None:
+    """The dual-IMU filter has the single-IMU filter's gate (``pipeline.eskf``): an unsure stance sample
+    while the filter knows the board moves at 1.9 m/s is skipped, with the stance's other updates, and
+    flagged (its stance then gives no floor level); a sure one is applied."""
+    from pipeline.dual_imu_eskf import AUX_LAST_REJECTED, DualEskfConfig, DualEskfStream
+
+    rate = 1000.0
+    f_b = np.array([0.0, 0.0, 9.80665])
+    acc_still = np.broadcast_to(f_b, (200, 2, 3)).copy()
+    gyr_still = np.zeros((200, 2, 3))
+    stream = DualEskfStream(DualEskfConfig(), np.array([0.015, 0.0, 0.0]), rate, acc_still, gyr_still)
+    stream.x[3] = 1.9
+    track = stream.step(
+        np.array([0.0]), acc_still[:1], gyr_still[:1], np.array([True]), np.array([1e-3]), np.array([ratio])
+    )
+    assert track.counters["zero_velocity_rejected"] == (0 if applied else 1)
+    assert track.counters["zero_velocity_updates"] == (1 if applied else 0)
+    assert stream.aux[AUX_LAST_REJECTED] == (0.0 if applied else 1.0)
+    assert (stream.x[3] < 1.0) if applied else (stream.x[3] == pytest.approx(1.9, abs=1e-3))
