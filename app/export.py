@@ -56,7 +56,7 @@ def navigate_recording(
         FootnavError: the recording never stands still, so it cannot be aligned.
     """
     config = NavConfig(profile=get_profile(profile or rec.profile), stance_levels=stance_levels)
-    gyr, _ = reconstruct_saturated_rates(rec.t_s, rec.gyr_b_radps)
+    gyr, reconstructed = reconstruct_saturated_rates(rec.t_s, rec.gyr_b_radps)
     if smooth:
         from pipeline.smoother import smooth_recording
 
@@ -68,6 +68,7 @@ def navigate_recording(
             f"{rec.name}: the unit is never still for {config.align_s:.1f} s, so roll and pitch cannot be "
             "aligned; a recording must start (or at least include) a moment of standing still"
         )
+    stats.rates_reconstructed = reconstructed
     return nav, stats
 
 
@@ -132,8 +133,10 @@ def run_export(
         if stats.samples_before_alignment
         else ""
     )
+    handled = f"; {h}" if (h := stats.handling()) else ""
     return (
         f"wrote {len(nav)} rows to {out} ({rec.format} recording, profile {profile or rec.profile}{skipped})"
+        f"{handled}"
     )
 
 

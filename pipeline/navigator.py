@@ -98,7 +98,21 @@ class NavStats:
     zero_velocity_rejected: int = 0
     zero_rate_updates: int = 0
     zero_rate_rejected: int = 0
+    rates_reconstructed: int = 0
+    """Saturated gyroscope values reconstructed before navigating (whole recordings only:
+    ``pipeline.saturation``)."""
     aligned_at_s: float | None = None
+
+    def handling(self) -> str:
+        """What was done with bad or doubtful input, as a phrase (empty when nothing was)."""
+        parts = [
+            (self.bad_samples, "samples not finite or impossible (not integrated)"),
+            (self.bad_dt, "non-positive time steps (not integrated)"),
+            (self.gaps, "gaps in the stream"),
+            (self.rates_reconstructed, "gyroscope values taken as saturated and reconstructed"),
+            (self.zero_velocity_rejected, "zero-velocity samples skipped (the filter saw the foot moving)"),
+        ]
+        return ", ".join(f"{n} {what}" for n, what in parts if n)
 
 
 class InitialSigmas(Protocol):

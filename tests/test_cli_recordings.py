@@ -36,6 +36,18 @@ def test_export_writes_one_row_per_sample(tmp_path: Path, shared_data: Path) -> 
     np.testing.assert_allclose(data[0, 1:4], 0.0, atol=1e-3)  # origin at the start
 
 
+def test_export_says_what_it_did_with_doubtful_input(tmp_path: Path, shared_data: Path) -> None:
+    """The summary line counts the x-io file's duplicated time stamps (not integrated) and, on the PyShoe
+    trial with a mid-swing "stance", the zero-velocity samples the filter skipped (``pipeline.eskf``)."""
+    proc = _footnav("export", str(shared_data / "xio-gait-tracking" / "short_walk.csv"), "-o", str(tmp_path / "x.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert re.search(r"; \d+ non-positive time steps \(not integrated\)", proc.stdout), proc.stdout
+    trial = shared_data / "pyshoe-vicon" / "2017-11-27-11-12-44.mat"
+    proc = _footnav("export", str(trial), "-o", str(tmp_path / "p.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert "2 zero-velocity samples skipped (the filter saw the foot moving)" in proc.stdout, proc.stdout
+
+
 def test_export_of_a_wrong_file_names_the_formats(tmp_path: Path) -> None:
     bad = tmp_path / "photo.jpg"
     bad.write_bytes(b"\xff\xd8\xff\xe0garbage")
