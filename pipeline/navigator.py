@@ -103,17 +103,6 @@ class NavStats:
     ``pipeline.saturation``)."""
     aligned_at_s: float | None = None
 
-    def handling(self) -> str:
-        """What was done with bad or doubtful input, as a phrase (empty when nothing was)."""
-        parts = [
-            (self.bad_samples, "samples not finite or impossible (not integrated)"),
-            (self.bad_dt, "non-positive time steps (not integrated)"),
-            (self.gaps, "gaps in the stream"),
-            (self.rates_reconstructed, "gyroscope values taken as saturated and reconstructed"),
-            (self.zero_velocity_rejected, "zero-velocity samples skipped (the filter saw the foot moving)"),
-        ]
-        return ", ".join(f"{n} {what}" for n, what in parts if n)
-
 
 class InitialSigmas(Protocol):
     """The initial 1σ a navigator's configuration holds (``NavConfig``, ``DualEskfConfig``)."""
