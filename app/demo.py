@@ -44,7 +44,7 @@ from app.live import (
     unit_header,
 )
 from app.session import SerialSessionResult, UnitAddress, run_device_session
-from app.status import StatusLine
+from app.status import StatusLine, input_handling
 from device.emulator.dual_imu import DEFAULT_LEVER_B_M, rigid_board
 from device.emulator.floors import floor_of
 from device.emulator.gait import GaitTruth, simulate_walk
@@ -351,6 +351,8 @@ def run_demo(opts: DemoOptions) -> int:
             continue
         for line in summary.lines():
             print(prefix + line)
+        if handled := input_handling(run.navigator.stats):
+            print(f"{prefix}input handling: {handled}")
         if isinstance(run.navigator, DualNavigator):
             for line in dual_summary_lines(run.navigator, truths[0][1], truths[0][2], lever):
                 print(prefix + line)

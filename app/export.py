@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.status import input_handling
 from device.capture import MCAP_MAGIC
 from pipeline.errors import FootnavError
 from pipeline.loaders import CsvMapping, Recording, load_recording
@@ -138,18 +139,6 @@ def run_export(
         f"wrote {len(nav)} rows to {out} ({rec.format} recording, profile {profile or rec.profile}{skipped})"
         f"{handled}"
     )
-
-
-def input_handling(stats: NavStats) -> str:
-    """What was done with bad or doubtful input, as a phrase (empty when nothing was)."""
-    parts = [
-        (stats.bad_samples, "samples not finite or impossible (not integrated)"),
-        (stats.bad_dt, "non-positive time steps (not integrated)"),
-        (stats.gaps, "gaps in the stream"),
-        (stats.rates_reconstructed, "gyroscope values taken as saturated and reconstructed"),
-        (stats.zero_velocity_rejected, "zero-velocity samples skipped (the filter saw the foot moving)"),
-    ]
-    return ", ".join(f"{n} {what}" for n, what in parts if n)
 
 
 def _is_capture(path: Path) -> bool:

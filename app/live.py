@@ -29,7 +29,7 @@ from app import heap
 from app.calibration_store import StoredCalibration, any_calibrations, calibration_dir, load_calibration
 from app.config import DEFAULT, Config
 from app.session import CalibrationLookup, LinkHealth, SerialSessionResult, UnitAddress, run_device_session
-from app.status import StatusLine
+from app.status import StatusLine, input_handling
 from device.capture import CaptureTap, CaptureWriter, UnitHeader
 from device.links import LinkEvent, LinkGap, ReconnectingLink
 from device.raw_imu import DUAL_IMU_MASK
@@ -267,6 +267,8 @@ def link_summary(run: FootRun) -> str:
             f"; link: {health.reconnects} reconnects, {health.stalls} stalls, {len(health.gaps)} gaps "
             f"({health.downtime_s:.2f} s without data, {health.packets_missing} packets missing{still_open})"
         )
+    if handled := input_handling(run.navigator.stats):
+        line += f"; {handled}"
     return line
 
 

@@ -24,7 +24,7 @@ from app.calibration_store import StoredCalibration, calibration_dir, load_calib
 from app.config import Config, apply_capture_settings
 from app.live import FootRun, dual_nav_config, dual_view_sink, foot_sinks, notice
 from app.session import CalibrationLookup, run_unit_session
-from app.status import Progress, StatusLine
+from app.status import Progress, StatusLine, input_handling
 from device.capture import EXPECTED, MCAP_MAGIC, CaptureReplayLink, summarize_capture
 from device.raw_imu import DUAL_IMU_MASK
 from device.unit import OpenShoeUnit, RawImuMode
@@ -262,5 +262,6 @@ def run_replay(opts: ReplayOptions) -> int:
         print(
             f"{prefix}samples navigated: {st.samples_out} of {run.result.samples_received} replayed "
             f"(lost packets: {lost}); distance {status.foot(run.foot).distance_m:.2f} m"
+            + (f"; {handled}" if (handled := input_handling(st)) else "")
         )
     return 0

@@ -10,6 +10,7 @@ from typing import TextIO
 import numpy as np
 
 from pipeline.nav_types import NavBatch
+from pipeline.navigator import NavStats
 
 RATE_WINDOW_S = 2.0
 """The sample rate shown is averaged over about this much wall time."""
@@ -185,3 +186,15 @@ class Progress:
         if self.tty:
             self.stream.write("\r\x1b[2K" + self.text() + "\n")
             self.stream.flush()
+
+
+def input_handling(stats: NavStats) -> str:
+    """What was done with bad or doubtful input, as a phrase (empty when nothing was)."""
+    parts = [
+        (stats.bad_samples, "samples not finite or impossible (not integrated)"),
+        (stats.bad_dt, "non-positive time steps (not integrated)"),
+        (stats.gaps, "gaps in the stream"),
+        (stats.rates_reconstructed, "gyroscope values taken as saturated and reconstructed"),
+        (stats.zero_velocity_rejected, "zero-velocity samples skipped (the filter saw the foot moving)"),
+    ]
+    return ", ".join(f"{n} {what}" for n, what in parts if n)

@@ -99,6 +99,8 @@ def test_live_session_survives_unplug_and_replug(tmp_path: Path) -> None:
     assert lost == missing >= lost_while_unplugged
     assert 0.7 < downtime < 5
     assert received >= 4000 + 3000 - 200
+    # and the navigator's side of it: the samples after the gap come one long interval later
+    assert re.search(r"packets missing\); 1 gaps in the stream", out), out
 
     # The capture holds both sides of the gap, the re-sent start command and the gap as events.
     (capture,) = tmp_path.glob("live-*.mcap")
