@@ -16,6 +16,7 @@ import numpy as np
 
 from app.export import navigate_recording
 from app.progress import ProgressBar
+from app.status import input_handling
 from pipeline.errors import FootnavError
 from pipeline.loaders import detect_format, load_recording
 from pipeline.metrics import armse_2d_pyshoe, ate, loop_closure_error, path_length_m
@@ -36,6 +37,8 @@ class Evaluation:
     end_point_m: float = math.nan
     loop_3d_m: float = math.nan
     loop_2d_m: float = math.nan
+    handling: str = ""
+    """What was done with doubtful input (``app.status.input_handling``; empty: nothing)."""
 
     @property
     def end_point_pct(self) -> float:
@@ -71,6 +74,7 @@ def evaluate_file(path: Path, smooth: bool = False, stance_levels: bool = True) 
             ate_3d_m=fit.rmse_3d_m,
             mirrored=fit.mirrored,
             end_point_m=float(np.linalg.norm(aligned[-1] - gt[-1])),
+            handling=input_handling(stats),
         )
     loop_3d, loop_2d = loop_closure_error(est)
     return Evaluation(
@@ -81,6 +85,7 @@ def evaluate_file(path: Path, smooth: bool = False, stance_levels: bool = True) 
         loop_3d_m=loop_3d,
         loop_2d_m=loop_2d,
         end_point_m=loop_3d,
+        handling=input_handling(stats),
     )
 
 
@@ -132,6 +137,10 @@ def format_table(rows: list[Evaluation]) -> str:
             f"closed loops ({len(loops)} files): loop closure 3D mean {np.mean([r.loop_3d_m for r in loops]):.3f} m, "
             f"2D mean {np.mean([r.loop_2d_m for r in loops]):.3f} m"
         )
+    handled = [r for r in rows if r.handling]
+    if handled:
+        lines.append("input handling:")
+        lines.extend(f"  {r.name}: {r.handling}" for r in handled)
     return "\n".join(lines)
 
 
