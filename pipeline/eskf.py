@@ -71,7 +71,9 @@ from g instead of T/γ, were measured on every recording and did worse as a whol
 A stance sample the detector is unsure of (T/γ above ``PAR_ZUPT_GATE_RATIO``) is checked against
 the filter's own prediction first: if the normalised innovation squared of the zero-velocity update
 exceeds ``PAR_ZUPT_GATE`` (10σ) the filter knows the foot is moving, the sample is taken for a
-detector error and skipped (counted in ``CNT_ZUPT_REJECTED``). A PyShoe walking trial has a 2-sample
+detector error and skipped (counted in ``CNT_ZUPT_REJECTED``; ``FLAG_LAST_REJECTED`` tells the
+navigator that a stance's height-update sample was one, so that stance gives no floor level). A
+PyShoe walking trial has a 2-sample
 "stance" in mid-swing at a true 1.9 m/s, which alone took its ARMSE-2D from 0.044 to 0.070 m.
 Samples the detector is sure of are always applied, so a filter whose velocity has gone wrong
 (running, whose reconstructed swings end with up to 1.5 m/s of velocity error) is not locked out of
