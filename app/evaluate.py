@@ -57,6 +57,7 @@ def evaluate_file(path: Path, smooth: bool = False, stance_levels: bool = True) 
     nav, stats = navigate_recording(rec, smooth=smooth, stance_levels=stance_levels)
     est = nav.pos_n_m
     skipped = stats.samples_before_alignment
+    handling = input_handling(stats)
     if rec.gt_pos_m is not None:
         gt = rec.gt_pos_m[skipped:] - rec.gt_pos_m[skipped]
         fit = ate(est, gt, mirror_test=True)
@@ -74,7 +75,7 @@ def evaluate_file(path: Path, smooth: bool = False, stance_levels: bool = True) 
             ate_3d_m=fit.rmse_3d_m,
             mirrored=fit.mirrored,
             end_point_m=float(np.linalg.norm(aligned[-1] - gt[-1])),
-            handling=input_handling(stats),
+            handling=handling,
         )
     loop_3d, loop_2d = loop_closure_error(est)
     return Evaluation(
@@ -85,7 +86,7 @@ def evaluate_file(path: Path, smooth: bool = False, stance_levels: bool = True) 
         loop_3d_m=loop_3d,
         loop_2d_m=loop_2d,
         end_point_m=loop_3d,
-        handling=input_handling(stats),
+        handling=handling,
     )
 
 

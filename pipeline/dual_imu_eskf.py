@@ -65,7 +65,7 @@ from pipeline.dual_imu_common import (
     sample_ok,
     still_window,
 )
-from pipeline.eskf import inject_attitude_and_reset, sample_intervals, zupt_vertical_weight
+from pipeline.eskf import inject_attitude_and_reset, sample_intervals, zupt_gate, zupt_vertical_weight
 from pipeline.navigator import (
     DEFAULT_DT_MAX_S,
     ZARU_GATE_CHI2_3DOF,
@@ -402,7 +402,7 @@ def run_dual_filter(
                 r[c] = par[PAR_ZUPT] ** 2 + par[PAR_ROLL_LEVER] ** 2 * w2sum
             r[2] += par[PAR_ZUPT_VERT_STAT] ** 2 * zupt_vertical_weight(zupt_ratio[k])  # soft vertical (eskf)
             # an unsure sample whose velocity says the foot moves is skipped (pipeline.eskf's gate)
-            gate = np.inf if zupt_ratio[k] <= par[PAR_ZUPT_GATE_RATIO] else par[PAR_ZUPT_GATE]
+            gate = zupt_gate(zupt_ratio[k], par[PAR_ZUPT_GATE], par[PAR_ZUPT_GATE_RATIO])
             moving = kf_dense.update3(dx, P, H, y, r, work, gate) >= gate
             if moving:
                 counters[CNT_ZUPT_REJECTED] += 1

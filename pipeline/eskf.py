@@ -498,6 +498,15 @@ def zupt_vertical_weight(ratio: float) -> float:
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def zupt_gate(ratio: float, gate_nis: float, sure_below: float) -> float:
+    """The NIS above which a zero-velocity sample is skipped (module docstring): ``gate_nis`` when
+    the detector is unsure of it (T/γ = ``ratio`` above ``sure_below``; NaN or inf, a stance from
+    another source than the statistic), else inf (always applied); shared with the dual-IMU
+    filter."""  # pragma: no cover
+    return math.inf if ratio <= sure_below else gate_nis
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _correct(
     x: F64,
     P: F64,
@@ -518,8 +527,8 @@ def _correct(
         y[r] = -x[3 + r]
         w2 += (gyr_b_radps[k, r] - x[13 + r]) ** 2
     r_h, r_v = _zupt_noise(par, w2, zupt_ratio[k])
-    unsure = not (zupt_ratio[k] <= par[PAR_ZUPT_GATE_RATIO])  # NaN or inf: a stance from elsewhere
-    if unsure and _nis3(P, V0, y[0], y[1], y[2], r_h, r_h, r_v) > par[PAR_ZUPT_GATE]:
+    gate = zupt_gate(zupt_ratio[k], par[PAR_ZUPT_GATE], par[PAR_ZUPT_GATE_RATIO])
+    if gate < math.inf and _nis3(P, V0, y[0], y[1], y[2], r_h, r_h, r_v) > gate:  # NIS only when unsure
         counters[CNT_ZUPT_REJECTED] += 1
         counters[FLAG_LAST_REJECTED] = 1
         return
