@@ -57,19 +57,24 @@ def navigate_recording(
         FootnavError: the recording never stands still, so it cannot be aligned.
     """
     config = NavConfig(profile=get_profile(profile or rec.profile), stance_levels=stance_levels)
-    gyr, reconstructed = reconstruct_saturated_rates(rec.t_s, rec.gyr_b_radps)
+    sat = reconstruct_saturated_rates(rec.t_s, rec.gyr_b_radps)
     if smooth:
         from pipeline.smoother import smooth_recording
 
-        nav, stats = smooth_recording(rec.t_s, rec.acc_b_mps2, gyr, rec.rate_hz, config)
+        nav, stats = smooth_recording(
+            rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, config, gyr_clipped_b=sat.clipped_b
+        )
     else:
-        nav, stats = navigate(rec.t_s, rec.acc_b_mps2, gyr, rec.rate_hz, config)
+        nav, stats = navigate(
+            rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, config, gyr_clipped_b=sat.clipped_b
+        )
     if nav is None:
         raise FootnavError(
             f"{rec.name}: the unit is never still for {config.align_s:.1f} s, so roll and pitch cannot be "
             "aligned; a recording must start (or at least include) a moment of standing still"
         )
-    stats.rates_reconstructed = reconstructed
+    stats.rates_reconstructed = sat.reconstructed
+    stats.rates_clipped = int(np.count_nonzero(sat.clipped_b))
     return nav, stats
 
 

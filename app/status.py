@@ -194,7 +194,11 @@ def input_handling(stats: NavStats) -> str:
         (stats.bad_samples, "samples not finite or impossible (not integrated)"),
         (stats.bad_dt, "non-positive time steps (not integrated)"),
         (stats.gaps, "gaps in the stream"),
-        (stats.rates_reconstructed, "gyroscope values taken as saturated and reconstructed"),
+        (
+            stats.rates_clipped,
+            f"gyroscope values taken as clipped at the sensor's range ({stats.rates_reconstructed} raised by "
+            "the reconstruction; all navigated as uncertain)",
+        ),
         (stats.zero_velocity_rejected, "zero-velocity samples skipped (the filter saw the foot moving)"),
     ]
     return ", ".join(f"{n} {what}" for n, what in parts if n)

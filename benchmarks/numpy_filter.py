@@ -123,8 +123,10 @@ def run_filter_numpy(
     stance: NDArray[np.bool_],
     zupt_ratio: F64,
     par: F64,
+    gyr_clip_var_b: F64 | None = None,
 ) -> FilterRun:
-    """Run the filter sample by sample; arguments as ``pipeline.eskf.run_filter`` (not modified)."""
+    """Run the filter sample by sample; arguments as ``pipeline.eskf.run_filter`` (not modified),
+    ``gyr_clip_var_b`` (n, 3) or None for none."""
     n = acc_b_mps2.shape[0]
     x, P = x.astype(np.float64).copy(), P.astype(np.float64).copy()
     g = par[eskf.PAR_G]
@@ -172,6 +174,8 @@ def run_filter_numpy(
                 par[eskf.PAR_BG_RW] ** 2 * dt,
             ]
             Q = np.diag(np.repeat(q_block, 3))
+            if gyr_clip_var_b is not None and not bad:  # rate noise along the clipped body axes
+                Q[_TH, _TH] += R @ np.diag(gyr_clip_var_b[k]) @ R.T * dt * dt
             P = F @ P @ F.T + Q
             P = 0.5 * (P + P.T)
         counters[eskf.FLAG_LAST_REJECTED] = 0

@@ -33,7 +33,15 @@ from device.emulator.imu_errors import corrupt
 from pipeline import eskf
 from pipeline.alignment import align_from_still
 from pipeline.detectors import StreamingDetector
-from pipeline.navigator import NavConfig, Navigator, filter_parameters, initial_error_sigmas, navigate, zupt_ratio
+from pipeline.navigator import (
+    NO_CLIPPED_RATES,
+    NavConfig,
+    Navigator,
+    filter_parameters,
+    initial_error_sigmas,
+    navigate,
+    zupt_ratio,
+)
 from pipeline.samples import ImuBatch
 
 RATE_HZ = 1000.0
@@ -174,7 +182,7 @@ def main(argv: list[str] | None = None) -> int:
         pos, vel, quat, cov = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 4)), np.empty((m, 4, 4))
         x, P = x0.copy(), P0.copy()
         eskf.run_filter(
-            x, P, acc[:m], gyr[:m], dt[:m], stance[:m], ratio[:m], par, pos, vel, quat, cov,
+            x, P, acc[:m], gyr[:m], NO_CLIPPED_RATES, dt[:m], stance[:m], ratio[:m], par, pos, vel, quat, cov,
             np.zeros(eskf.N_CNT, dtype=np.int64),
         )  # fmt: skip
         return pos, vel, quat, cov

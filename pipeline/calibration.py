@@ -44,7 +44,7 @@ References
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Final
 
 import numpy as np
@@ -335,7 +335,7 @@ class ImuCalibration:
     def correct(self, batch: ImuBatch, temp_c: F64 | None = None) -> ImuBatch:
         """The pipeline stage: ``batch`` with corrected ``acc_b_mps2`` and ``gyr_b_radps``."""
         acc, gyr = self.correct_arrays(batch.acc_b_mps2, batch.gyr_b_radps, temp_c)
-        return ImuBatch(batch.t_s, acc, gyr, batch.counter, batch.host_ns)
+        return replace(batch, acc_b_mps2=acc, gyr_b_radps=gyr)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able parameters with their 1σ and units (for the calibration file)."""

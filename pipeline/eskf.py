@@ -79,6 +79,12 @@ Samples the detector is sure of are always applied, so a filter whose velocity h
 (running, whose reconstructed swings end with up to 1.5 m/s of velocity error) is not locked out of
 its zero-velocity updates; gating those too (every sample at NIS 150, or 1.2 m/s) did exactly that.
 
+A sample whose rate was clipped at the sensor's range (``pipeline.saturation``, whole recordings)
+is uncertain along its own body axis: ``run_filter`` adds R diag(σ_i²) Rᵀ dt² to the attitude block
+of Q there, σ_i a share of the rate on each clipped axis i (``gyr_clip_var_b``), so the tilt a
+clipped pitch rate leaves is one the next stance's updates can explain, and the heading is not made
+uncertain by it.
+
 The covariance propagation multiplies only the non-identity blocks of F and writes one triangle
 (about 800 multiply-adds per sample instead of 2 × 15³); the updates observe three states each, so
 their Joseph form is rank-3 work on one triangle. The per-sample loop allocates nothing (scratch
@@ -141,7 +147,6 @@ def sample_intervals(t_s: F64, t_prev_s: float, dt_max_s: float) -> F64:
     counts it as a gap. Non-positive or NaN intervals pass through: the filter skips and counts them.
     """
     return np.minimum(np.diff(t_s, prepend=t_prev_s), dt_max_s)
-
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
@@ -397,11 +402,27 @@ def _process_noise(par: F64, f2: float, w2: float, dt: float, q_diag: F64) -> No
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _add_body_rate_noise(P: F64, R: F64, var_b: F64, k: int, dt: float) -> None:
+    """P[θ, θ] += R diag(v) Rᵀ dt² for the body-axis rate variances v = ``var_b[k]`` (rad²/s²) of a
+    sample whose rates are uncertain along their own axes (clipped: ``pipeline.saturation``); R the
+    attitude at the sample. Nothing when ``var_b`` has no rows (no sample is marked)."""  # pragma: no cover
+    if var_b.shape[0] == 0:
+        return
+    v0, v1, v2 = var_b[k, 0] * dt * dt, var_b[k, 1] * dt * dt, var_b[k, 2] * dt * dt
+    if v0 == 0.0 and v1 == 0.0 and v2 == 0.0:
+        return
+    for r in range(3):
+        for c in range(3):
+            P[TH0 + r, TH0 + c] += R[r, 0] * v0 * R[c, 0] + R[r, 1] * v1 * R[c, 1] + R[r, 2] * v2 * R[c, 2]
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _predict(
     x: F64,
     P: F64,
     acc_b_mps2: F64,
     gyr_b_radps: F64,
+    gyr_clip_var_b: F64,
     k: int,
     dt: float,
     par: F64,
@@ -475,6 +496,8 @@ def _predict(
             wn2 = w0 * w0 + w1 * w1 + w2 * w2
         _process_noise(par, f2, wn2, dt, q_diag)
         _propagate_cov(P, M, R0, f_n, dt, q_diag)
+        if not bad:
+            _add_body_rate_noise(P, R0, gyr_clip_var_b, k, dt)
     return bad, propagated
 
 
@@ -550,6 +573,7 @@ def run_filter(
     P: F64,
     acc_b_mps2: F64,
     gyr_b_radps: F64,
+    gyr_clip_var_b: F64,
     dt_s: F64,
     stance: NDArray[np.bool_],
     zupt_ratio: F64,
@@ -566,6 +590,8 @@ def run_filter(
         x, P: nominal state and error covariance, carried between batches. With floor levels as
             states (``pipeline.tof_aiding``) ``x`` is (16 + m,) and ``P`` (15 + m, 15 + m).
         acc_b_mps2, gyr_b_radps: (n, 3) IMU samples; sample k covers the interval ending at it.
+        gyr_clip_var_b: (n, 3) variance of each sample's rate error along each body axis beyond the
+            profile's noise, rad²/s² (clipped samples: ``pipeline.saturation``), or (0, 3): none.
         dt_s: (n,) interval before each sample, s. Non-positive intervals skip the propagation
             (duplicated timestamps); intervals of ``par[PAR_DT_MAX]`` or more are counted as gaps
             (:func:`sample_intervals` caps them there).
@@ -587,6 +613,8 @@ def run_filter(
         or dt_s.shape[0] != n
         or stance.shape[0] != n
         or zupt_ratio.shape[0] != n
+        or (gyr_clip_var_b.shape[0] != n and gyr_clip_var_b.shape[0] != 0)
+        or gyr_clip_var_b.shape[1] != 3
         or out_pos.shape[0] < n
         or out_vel.shape[0] < n
         or out_quat.shape[0] < n
@@ -659,6 +687,8 @@ def run_filter(
                 w2 = w0 * w0 + w1 * w1 + w2 * w2
             _process_noise(par, f2, w2, dt, q_diag)
             _propagate_cov(P, M, R0, f_n, dt, q_diag)
+            if not bad:
+                _add_body_rate_noise(P, R0, gyr_clip_var_b, k, dt)
         counters[FLAG_LAST_REJECTED] = 0
         if stance[k] and not bad:
             _correct(x, P, gyr_b_radps, zupt_ratio, k, par, y, work, counters)

@@ -27,6 +27,7 @@ from pipeline.height_detector import HeightStanceDetector
 from pipeline.nav_types import NavBatch
 from pipeline.profiles import UnitProfile, get_profile
 from pipeline.samples import ImuBatch
+from pipeline.saturation import clipped_rate_variance
 from pipeline.stance_levels import StanceLevelParams, StanceLevels
 from pipeline.tof_aiding import RangeBatch, RangeOutputs, TofAiding, TofConfig
 
@@ -98,9 +99,11 @@ class NavStats:
     zero_velocity_rejected: int = 0
     zero_rate_updates: int = 0
     zero_rate_rejected: int = 0
+    rates_clipped: int = 0
+    """Gyroscope values taken as clipped at the sensor's range and navigated as uncertain (whole
+    recordings only: ``pipeline.saturation``)."""
     rates_reconstructed: int = 0
-    """Saturated gyroscope values reconstructed before navigating (whole recordings only:
-    ``pipeline.saturation``)."""
+    """Of those, the values the reconstruction raised."""
     aligned_at_s: float | None = None
 
 
@@ -306,15 +309,18 @@ class Navigator:
         quat, cov = np.empty((n, 4)), np.empty((n, 4, 4))
         acc = np.ascontiguousarray(batch.acc_b_mps2, dtype=np.float64)
         gyr = np.ascontiguousarray(batch.gyr_b_radps, dtype=np.float64)
+        gyr_var = clip_variance(batch)
         still_c = np.ascontiguousarray(still)
         ratio = zupt_ratio(stat, threshold)
         floor_z: F64 | None = None
         floor_c: F64 | None = None
         ranges: RangeOutputs | None = None
         if not self.tof.active:
-            floor_c = self._run_with_levels(acc, gyr, dt, still_c, ratio, pos, vel, quat, cov)
+            floor_c = self._run_with_levels(acc, gyr, gyr_var, dt, still_c, ratio, pos, vel, quat, cov)
         else:
-            floor_z, floor_c, ranges = self._run_with_ranges(batch, acc, gyr, dt, still_c, ratio, pos, vel, quat, cov)
+            floor_z, floor_c, ranges = self._run_with_ranges(
+                batch, acc, gyr, gyr_var, dt, still_c, ratio, pos, vel, quat, cov
+            )
         c = self._counters
         s = self.stats
         s.bad_dt, s.gaps = int(c[eskf.CNT_BAD_DT]), int(c[eskf.CNT_GAP])
@@ -347,7 +353,17 @@ class Navigator:
         )
 
     def _run_with_levels(
-        self, acc: F64, gyr: F64, dt: F64, still: NDArray[np.bool_], ratio: F64, pos: F64, vel: F64, quat: F64, cov: F64
+        self,
+        acc: F64,
+        gyr: F64,
+        gyr_var: F64,
+        dt: F64,
+        still: NDArray[np.bool_],
+        ratio: F64,
+        pos: F64,
+        vel: F64,
+        quat: F64,
+        cov: F64,
     ) -> F64:
         """The filter over a batch with the stance height constraint applied once in each stance
         (``pipeline.stance_levels``): the batch is split there. Returns the height of the floor each
@@ -362,8 +378,8 @@ class Navigator:
             floor[a:end] = self.levels.floor_z_m
             if end > a:
                 eskf.run_filter(
-                    self._x, self._P, acc[a:end], gyr[a:end], dt[a:end], still[a:end], ratio[a:end], self._par,
-                    pos[a:end], vel[a:end], quat[a:end], cov[a:end], self._counters,
+                    self._x, self._P, acc[a:end], gyr[a:end], gyr_var[a:end], dt[a:end], still[a:end], ratio[a:end],
+                    self._par, pos[a:end], vel[a:end], quat[a:end], cov[a:end], self._counters,
                 )  # fmt: skip
             # a stance whose update sample the filter found moving (``pipeline.eskf``) gives no level
             if b is not None and not self._counters[eskf.FLAG_LAST_REJECTED]:
@@ -380,6 +396,7 @@ class Navigator:
         batch: ImuBatch,
         acc: F64,
         gyr: F64,
+        gyr_var: F64,
         dt: F64,
         still: NDArray[np.bool_],
         ratio: F64,
@@ -411,6 +428,7 @@ class Navigator:
                     P,
                     acc[a:b],
                     gyr[a:b],
+                    gyr_var[a:b],
                     dt[a:b],
                     still[a:b],
                     ratio[a:b],
@@ -481,6 +499,18 @@ def nav_batch(
     )
 
 
+NO_CLIPPED_RATES = np.empty((0, 3))
+"""``eskf.run_filter``'s clipped-rate variance when no sample is marked clipped."""
+
+
+def clip_variance(batch: ImuBatch) -> F64:
+    """The body-axis rate variance of ``batch``'s clipped samples (``pipeline.saturation``) as
+    ``eskf.run_filter`` takes it: (n, 3), or (0, 3) when none is marked."""
+    if batch.gyr_clipped_b is None or not batch.gyr_clipped_b.any():
+        return NO_CLIPPED_RATES
+    return clipped_rate_variance(batch.gyr_b_radps, batch.gyr_clipped_b)
+
+
 def zupt_ratio(stat: F64, threshold: F64) -> F64:
     """The detector's statistic over its threshold, T/γ (n,), contiguous, as ``eskf.run_filter``
     takes it (the vertical noise of each zero-velocity update, ``pipeline.eskf``)."""
@@ -519,7 +549,6 @@ def _first_run(mask: NDArray[np.bool_], length: int) -> int:
     return int(hits[0]) if hits.size else -1
 
 
-
 def navigate(
     t_s: F64,
     acc_b_mps2: F64,
@@ -529,14 +558,15 @@ def navigate(
     *,
     ranges: RangeBatch | None = None,
     tof: TofConfig | None = None,
+    gyr_clipped_b: NDArray[np.bool_] | None = None,
 ) -> tuple[NavBatch | None, NavStats]:
     """Run the causal navigator over whole arrays (tests, export, evaluation), with ToF ``ranges``
-    when given."""
+    when given, and the rates marked clipped in ``gyr_clipped_b`` (n, 3) (``pipeline.saturation``)."""
     nav = Navigator(config or NavConfig(), rate_hz, tof=tof)
     if ranges is not None:
         nav.add_ranges(ranges)
     n = t_s.shape[0]
     out = nav.process(
-        ImuBatch(t_s, acc_b_mps2, gyr_b_radps, np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64))
+        ImuBatch(t_s, acc_b_mps2, gyr_b_radps, np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64), gyr_clipped_b)
     )
     return out, nav.stats

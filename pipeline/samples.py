@@ -20,6 +20,8 @@ class ImuBatch:
         gyr_b_radps: (n, 3) angular rate in the body frame, rad/s.
         counter: (n,) packet counter as sent by the unit (for gap accounting).
         host_ns: (n,) host receive time, ``time.monotonic_ns()`` of the read that completed the packet.
+        gyr_clipped_b: (n, 3) which rates were cut off at the sensor's range and reconstructed, or None
+            (not known: live streams; found in whole recordings by ``pipeline.saturation``).
     """
 
     t_s: F64
@@ -27,6 +29,7 @@ class ImuBatch:
     gyr_b_radps: F64
     counter: NDArray[np.int64]
     host_ns: NDArray[np.int64]
+    gyr_clipped_b: NDArray[np.bool_] | None = None
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -39,15 +42,22 @@ class ImuBatch:
             gyr_b_radps=self.gyr_b_radps[index],
             counter=self.counter[index],
             host_ns=self.host_ns[index],
+            gyr_clipped_b=None if self.gyr_clipped_b is None else self.gyr_clipped_b[index],
         )
 
     @staticmethod
     def concat(batches: list[ImuBatch]) -> ImuBatch:
-        """Join batches in order into one."""
+        """Join batches in order into one (clipped flags where any batch has them)."""
+        clipped = None
+        if any(b.gyr_clipped_b is not None for b in batches):
+            clipped = np.concatenate(
+                [np.zeros((len(b), 3), dtype=bool) if b.gyr_clipped_b is None else b.gyr_clipped_b for b in batches]
+            )
         return ImuBatch(
             t_s=np.concatenate([b.t_s for b in batches]),
             acc_b_mps2=np.concatenate([b.acc_b_mps2 for b in batches]),
             gyr_b_radps=np.concatenate([b.gyr_b_radps for b in batches]),
             counter=np.concatenate([b.counter for b in batches]),
             host_ns=np.concatenate([b.host_ns for b in batches]),
+            gyr_clipped_b=clipped,
         )

@@ -81,7 +81,7 @@ from pipeline.eskf import (
     sample_intervals,
 )
 from pipeline.nav_types import NavBatch
-from pipeline.navigator import NavConfig, Navigator, NavStats, nav_batch, zupt_ratio
+from pipeline.navigator import NavConfig, Navigator, NavStats, clip_variance, nav_batch, zupt_ratio
 from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s
 from pipeline.samples import ImuBatch
 from pipeline.stance_levels import StanceLevelParams, StanceLevels, height_update
@@ -117,6 +117,7 @@ def _storing_pass(
     P: F64,
     acc_b_mps2: F64,
     gyr_b_radps: F64,
+    gyr_clip_var_b: F64,
     dt_s: F64,
     stance: NDArray[np.bool_],
     zupt_ratio: F64,
@@ -142,6 +143,7 @@ def _storing_pass(
         or dt_s.shape[0] != n
         or stance.shape[0] != n
         or zupt_ratio.shape[0] != n
+        or (gyr_clip_var_b.shape[0] != n and gyr_clip_var_b.shape[0] != 0)
         or xf.shape[0] < n
         or Pf.shape[0] < n
         or xp.shape[0] < n
@@ -159,7 +161,9 @@ def _storing_pass(
     M = np.empty((9, N_STATE))
     work = np.empty((10, N_STATE))
     for k in range(n):
-        bad, propagated = _predict(x, P, acc_b_mps2, gyr_b_radps, k, dt_s[k], par, q_diag, f_n, R0, R1, M, counters)
+        bad, propagated = _predict(
+            x, P, acc_b_mps2, gyr_b_radps, gyr_clip_var_b, k, dt_s[k], par, q_diag, f_n, R0, R1, M, counters
+        )
         for i in range(16):
             xp[k, i] = x[i]
         for i in range(N_STATE):
@@ -182,7 +186,7 @@ def _storing_pass(
 
 
 def _storing_segment(
-    x: F64, P: F64, lo: int, hi: int, a: int, acc: F64, gyr: F64, dt: F64, stance: NDArray[np.bool_],
+    x: F64, P: F64, lo: int, hi: int, a: int, acc: F64, gyr: F64, gyr_var: F64, dt: F64, stance: NDArray[np.bool_],
     ratio: F64, par: F64, xf: F64, Pf: F64, xp: F64, Pp: F64, fn: F64, Rm: F64,
 ) -> None:  # fmt: skip
     """:func:`_storing_pass` over samples lo..hi−1 of the recording, into the buffers of the segment
@@ -190,7 +194,7 @@ def _storing_segment(
     if hi > lo:
         b = slice(lo - a, None)
         _storing_pass(
-            x, P, acc[lo:hi], gyr[lo:hi], dt[lo:hi], stance[lo:hi], ratio[lo:hi], par,
+            x, P, acc[lo:hi], gyr[lo:hi], gyr_var[lo:hi], dt[lo:hi], stance[lo:hi], ratio[lo:hi], par,
             xf[b], Pf[b], xp[b], Pp[b], fn[b], Rm[b],
         )  # fmt: skip
 
@@ -395,6 +399,7 @@ def smooth_recording(
     config: NavConfig | None = None,
     *,
     segment_samples: int = SEGMENT_SAMPLES,
+    gyr_clipped_b: NDArray[np.bool_] | None = None,
 ) -> tuple[NavBatch | None, NavStats]:
     """The RTS-smoothed navigation solution of a whole recording (not causal: replay, export, evaluation).
 
@@ -406,13 +411,21 @@ def smooth_recording(
     Args:
         segment_samples: samples per checkpointed segment: bounds the working memory to about
             ``BYTES_PER_BUFFERED_SAMPLE`` (3.9 KB) times this; the result does not depend on it.
+        gyr_clipped_b: (n, 3) the rates marked clipped (``pipeline.saturation``), as for ``navigate``.
     """
     if segment_samples < 1:
         raise ValueError("segment_samples must be at least 1")
     nav = _CheckpointingNavigator(config or NavConfig(), rate_hz, segment_samples)
     n_in = t_s.shape[0]
     out = nav.process(
-        ImuBatch(t_s, acc_b_mps2, gyr_b_radps, np.arange(n_in, dtype=np.int64), np.zeros(n_in, dtype=np.int64))
+        ImuBatch(
+            t_s,
+            acc_b_mps2,
+            gyr_b_radps,
+            np.arange(n_in, dtype=np.int64),
+            np.zeros(n_in, dtype=np.int64),
+            gyr_clipped_b,
+        )
     )
     if out is None:
         return None, nav.stats
@@ -421,6 +434,7 @@ def smooth_recording(
     ratio = np.ascontiguousarray(np.concatenate([r for _, _, r in nav.inputs]))
     acc = np.ascontiguousarray(batch.acc_b_mps2, dtype=np.float64)
     gyr = np.ascontiguousarray(batch.gyr_b_radps, dtype=np.float64)
+    gyr_var = clip_variance(batch)
     stance = np.ascontiguousarray(still)
     n = len(batch)
     level_updates = nav.level_updates or []
@@ -455,11 +469,11 @@ def smooth_recording(
         lo = a
         for j in range(bisect.bisect_left(level_at, a), bisect.bisect_left(level_at, stop)):
             k, z = level_updates[j]
-            _storing_segment(x, P, lo, k + 1, a, acc, gyr, dt, stance, ratio, nav._par, xf, Pf, xp, Pp, fn, Rm)
+            _storing_segment(x, P, lo, k + 1, a, acc, gyr, gyr_var, dt, stance, ratio, nav._par, xf, Pf, xp, Pp, fn, Rm)
             height_update(x, P, -1, z, level_r, work)
             xf[k - a], Pf[k - a] = x, P
             lo = k + 1
-        _storing_segment(x, P, lo, stop, a, acc, gyr, dt, stance, ratio, nav._par, xf, Pf, xp, Pp, fn, Rm)
+        _storing_segment(x, P, lo, stop, a, acc, gyr, gyr_var, dt, stance, ratio, nav._par, xf, Pf, xp, Pp, fn, Rm)
         if is_last:
             ds[:] = 0.0
             Ps[:] = Pf[m - 1]

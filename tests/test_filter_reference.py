@@ -2,7 +2,8 @@
 
 The reference multiplies full (15, 15) matrices and writes the Joseph form with ``np.linalg``; the
 compiled filter uses block-sparse propagation, rank-3 updates and one-triangle symmetry. On a walk
-with a bad sample, a duplicated timestamp and a gap in it they must agree to rounding.
+with a bad sample, a duplicated timestamp, a gap and samples marked clipped in it they must agree to
+rounding.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from pipeline.alignment import align_from_still
 from pipeline.detectors import DetectorParams, StreamingDetector
 from pipeline.navigator import filter_parameters, zupt_ratio
 from pipeline.profiles import get_profile
+from pipeline.saturation import clipped_rate_variance
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # benchmarks/ is not an installed package
@@ -45,17 +47,21 @@ def _inputs() -> tuple[np.ndarray, ...]:
     P = np.diag(np.array([1e-5] * 3 + [0.01] * 3 + [0.01, 0.01, 2e-4] + [0.05] * 3 + [2e-3] * 3) ** 2)
     par = filter_parameters(get_profile("mpu6500x4"), RATE_HZ, al.gravity_mps2, 0.05)
     dt = np.diff(t, prepend=t[0] - 1.0 / RATE_HZ)
-    return x, P, acc, gyr, dt, stance, ratio, par
+    # the fastest tenth of the pitch rates taken as clipped (uncertain along their own axis)
+    clipped = np.zeros(acc.shape, dtype=bool)
+    clipped[:, 1] = np.abs(gyr[:, 1]) > np.quantile(np.abs(gyr[:, 1]), 0.9)
+    var = clipped_rate_variance(gyr, clipped)
+    return x, P, acc, gyr, var, dt, stance, ratio, par
 
 
 def test_compiled_filter_matches_numpy_reference() -> None:
-    x, P, acc, gyr, dt, stance, ratio, par = _inputs()
+    x, P, acc, gyr, var, dt, stance, ratio, par = _inputs()
     n = acc.shape[0]
-    ref = run_filter_numpy(x, P, acc, gyr, dt, stance, ratio, par)
+    ref = run_filter_numpy(x, P, acc, gyr, dt, stance, ratio, par, var)
     x_c, P_c = x.copy(), P.copy()
     pos, vel, quat, pos_cov = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
     counters = np.zeros(eskf.N_CNT, dtype=np.int64)
-    eskf.run_filter(x_c, P_c, acc, gyr, dt, stance, ratio, par, pos, vel, quat, pos_cov, counters)
+    eskf.run_filter(x_c, P_c, acc, gyr, var, dt, stance, ratio, par, pos, vel, quat, pos_cov, counters)
 
     np.testing.assert_array_equal(counters, ref.counters)
     assert counters[eskf.CNT_BAD_SAMPLE] == 1 and counters[eskf.CNT_BAD_DT] == 1 and counters[eskf.CNT_GAP] == 1
@@ -70,7 +76,7 @@ def test_compiled_filter_matches_numpy_reference() -> None:
 
 
 def test_batches_do_not_change_the_result() -> None:
-    x, P, acc, gyr, dt, stance, ratio, par = _inputs()
+    x, P, acc, gyr, var, dt, stance, ratio, par = _inputs()
     n = acc.shape[0]
 
     def run(cuts: list[int]) -> np.ndarray:
@@ -80,7 +86,7 @@ def test_batches_do_not_change_the_result() -> None:
         for a, b in zip([0, *cuts], [*cuts, n], strict=True):
             m = b - a
             eskf.run_filter(
-                x_c, P_c, acc[a:b], gyr[a:b], dt[a:b], stance[a:b], ratio[a:b], par,
+                x_c, P_c, acc[a:b], gyr[a:b], var[a:b], dt[a:b], stance[a:b], ratio[a:b], par,
                 pos[a:b], np.empty((m, 3)), np.empty((m, 4)), np.empty((m, 4, 4)), counters,
             )  # fmt: skip
         return pos

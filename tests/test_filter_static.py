@@ -10,7 +10,7 @@ import pytest
 from pipeline import eskf
 from pipeline.alignment import align_from_still
 from pipeline.errors import InputFormatError
-from pipeline.navigator import NavConfig, navigate
+from pipeline.navigator import NO_CLIPPED_RATES, NavConfig, navigate
 from pipeline.quaternion import quat_from_euler_zyx, quat_to_mat, yaw_of
 
 RATE_HZ = 1000.0
@@ -154,7 +154,8 @@ def test_strapdown_step_is_second_order_on_exact_signals() -> None:
         dt[0] = 0.0  # sample 0 is the initial state
         pos, vel, quat, cov = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
         eskf.run_filter(
-            x, np.eye(eskf.N_STATE), truth.acc_b_mps2, truth.gyr_b_radps, dt, np.zeros(n, np.bool_), np.zeros(n),
+            x, np.eye(eskf.N_STATE), truth.acc_b_mps2, truth.gyr_b_radps, NO_CLIPPED_RATES, dt, np.zeros(n, np.bool_),
+            np.zeros(n),
             par, pos, vel, quat, cov, np.zeros(eskf.N_CNT, np.int64),
         )  # fmt: skip
         errors.append(float(np.linalg.norm(pos[-1] - truth.pos_n_m[-1])))
@@ -186,7 +187,9 @@ def test_zero_velocity_sample_of_a_moving_foot(ratio: float, applied: bool) -> N
     x, P, acc, gyr, par = _moving_filter(1.9)
     counters = np.zeros(eskf.N_CNT, dtype=np.int64)
     out = np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 4)), np.empty((1, 4, 4))
-    eskf.run_filter(x, P, acc, gyr, np.array([1e-3]), np.array([True]), np.array([ratio]), par, *out, counters)
+    eskf.run_filter(
+        x, P, acc, gyr, NO_CLIPPED_RATES, np.array([1e-3]), np.array([True]), np.array([ratio]), par, *out, counters
+    )
     assert counters[eskf.CNT_ZUPT_REJECTED] == (0 if applied else 1)
     assert counters[eskf.CNT_UPDATES] == (1 if applied else 0)
     assert counters[eskf.FLAG_LAST_REJECTED] == (0 if applied else 1)
@@ -200,5 +203,7 @@ def test_zero_velocity_sample_near_rest_is_applied_when_unsure() -> None:
     x, P, acc, gyr, par = _moving_filter(0.05)
     counters = np.zeros(eskf.N_CNT, dtype=np.int64)
     out = np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 4)), np.empty((1, 4, 4))
-    eskf.run_filter(x, P, acc, gyr, np.array([1e-3]), np.array([True]), np.array([0.99]), par, *out, counters)
+    eskf.run_filter(
+        x, P, acc, gyr, NO_CLIPPED_RATES, np.array([1e-3]), np.array([True]), np.array([0.99]), par, *out, counters
+    )
     assert counters[eskf.CNT_ZUPT_REJECTED] == 0 and counters[eskf.CNT_UPDATES] == 1

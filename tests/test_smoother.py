@@ -11,10 +11,11 @@ import pytest
 from device.emulator.gait import simulate_walk
 from device.emulator.imu_errors import corrupt
 from pipeline import eskf
-from pipeline.navigator import NavConfig, Navigator, navigate, zupt_ratio
+from pipeline.navigator import NO_CLIPPED_RATES, NavConfig, Navigator, navigate, zupt_ratio
 from pipeline.profiles import get_profile
 from pipeline.quaternion import quat_from_euler_zyx, quat_to_mat
 from pipeline.samples import ImuBatch
+from pipeline.saturation import clipped_rate_variance
 from pipeline.smoother import _backward_pass, _storing_pass, smooth_recording
 
 RATE_HZ = 1000.0
@@ -84,21 +85,27 @@ def test_result_does_not_depend_on_the_segment_length(walk) -> None:  # type: ig
 
 
 def test_storing_pass_reproduces_the_causal_filter(walk) -> None:  # type: ignore[no-untyped-def]
-    """``eskf._predict``/``_correct`` mirror ``run_filter``'s loop body: bit for bit, on every branch."""
+    """``eskf._predict``/``_correct`` mirror ``run_filter``'s loop body: bit for bit, on every branch
+    (clipped rates among them)."""
     truth, acc, gyr, _, _, _, _ = walk
     t, acc, gyr = truth.t_s.copy(), acc.copy(), gyr.copy()
     acc[8000:8005] = np.nan
     t[20_000] = t[19_999]
     t[30_000:] += 0.3
     n = t.size
+    clipped = np.zeros((n, 3), dtype=bool)
+    clipped[np.abs(gyr) > 0.8 * np.abs(gyr).max(axis=0)] = True
+    clipped[8000:8005] = True  # bad samples: no extra noise
+    var = clipped_rate_variance(gyr, clipped)
     x, P, par, dt, stance, ratio = _initial(t, acc, gyr)
     x2, P2 = x.copy(), P.copy()
     counters = np.zeros(eskf.N_CNT, dtype=np.int64)
     out = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
-    eskf.run_filter(x, P, acc, gyr, dt, stance, ratio, par, *out, counters)
+    eskf.run_filter(x, P, acc, gyr, var, dt, stance, ratio, par, *out, counters)
     assert counters[eskf.CNT_BAD_SAMPLE] == 5 and counters[eskf.CNT_BAD_DT] == 1 and counters[eskf.CNT_GAP] == 1
+    assert 50 < np.count_nonzero(var.any(axis=1)) < n // 10
     xf, Pf, _, _, fn, _ = bufs = _buffers(n)
-    _storing_pass(x2, P2, acc, gyr, dt, stance, ratio, par, *bufs)
+    _storing_pass(x2, P2, acc, gyr, var, dt, stance, ratio, par, *bufs)
     np.testing.assert_array_equal(xf[:, :3], out[0])
     np.testing.assert_array_equal(xf[:, 3:6], out[1])
     np.testing.assert_array_equal(xf[:, 6:10], out[2])
@@ -117,10 +124,12 @@ def test_backward_pass_matches_a_dense_rts_smoother(walk) -> None:  # type: igno
     x, P, par, dt, stance, ratio = _initial(truth.t_s[: a + n], acc[: a + n], gyr[: a + n])
     counters = np.zeros(eskf.N_CNT, dtype=np.int64)
     pos, vel, quat, cov = np.empty((a, 3)), np.empty((a, 3)), np.empty((a, 4)), np.empty((a, 4, 4))
-    eskf.run_filter(x, P, acc[:a], gyr[:a], dt[:a], stance[:a], ratio[:a], par, pos, vel, quat, cov, counters)
+    eskf.run_filter(
+        x, P, acc[:a], gyr[:a], NO_CLIPPED_RATES, dt[:a], stance[:a], ratio[:a], par, pos, vel, quat, cov, counters
+    )
     xf, Pf, xp, Pp, fn, Rm = bufs = _buffers(n)
     sl = slice(a, a + n)
-    _storing_pass(x, P, acc[sl], gyr[sl], dt[sl], stance[sl], ratio[sl], par, *bufs)
+    _storing_pass(x, P, acc[sl], gyr[sl], NO_CLIPPED_RATES, dt[sl], stance[sl], ratio[sl], par, *bufs)
     assert stance[sl].any() and not stance[sl].all()
     ds, Ps, xs = np.zeros(15), Pf[-1].copy(), xf[-1].copy()
     out = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))

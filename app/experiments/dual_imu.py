@@ -37,7 +37,7 @@ from pipeline.alignment import align_from_still
 from pipeline.detectors import StreamingDetector
 from pipeline.dual_imu_eskf import DualEskfConfig, DualEskfTrack, run_dual_eskf
 from pipeline.dual_imu_paper import DualTrack, PaperConfig, run_paper
-from pipeline.navigator import NavConfig, filter_parameters, navigate, zupt_ratio
+from pipeline.navigator import NO_CLIPPED_RATES, NavConfig, filter_parameters, navigate, zupt_ratio
 from pipeline.profiles import UnitProfile, get_profile
 from views.dual_imu import DualRunView, save_dual_runs
 
@@ -95,8 +95,9 @@ def classic_track(
     counters = np.zeros(eskf.N_CNT, dtype=np.int64)
     # T/γ = 0: the same zero-velocity noise on every axis, as the classic filter has it
     eskf.run_filter(
-        x, P, acc_b_mps2, gyr_b_radps, dt, np.ascontiguousarray(stance), np.zeros(n), par, pos, vel, quat, cov, counters
-    )
+        x, P, acc_b_mps2, gyr_b_radps, NO_CLIPPED_RATES, dt, np.ascontiguousarray(stance), np.zeros(n), par,
+        pos, vel, quat, cov, counters,
+    )  # fmt: skip
     return pos
 
 
