@@ -353,18 +353,9 @@ class Navigator:
         )
 
     def _run_with_levels(
-        self,
-        acc: F64,
-        gyr: F64,
-        gyr_var: F64,
-        dt: F64,
-        still: NDArray[np.bool_],
-        ratio: F64,
-        pos: F64,
-        vel: F64,
-        quat: F64,
-        cov: F64,
-    ) -> F64:
+        self, acc: F64, gyr: F64, gyr_var: F64, dt: F64, still: NDArray[np.bool_], ratio: F64,
+        pos: F64, vel: F64, quat: F64, cov: F64,
+    ) -> F64:  # fmt: skip
         """The filter over a batch with the stance height constraint applied once in each stance
         (``pipeline.stance_levels``): the batch is split there. Returns the height of the floor each
         sample's clearance is measured from (n,): the level of its stance, or in swing the level of

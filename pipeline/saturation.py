@@ -56,12 +56,13 @@ SATURATION_FRACTION = 0.95
 FIT_NEIGHBOURS = 3
 """Samples on each side of a saturated stretch the quadratic is fitted through (6 points, 3 unknowns)."""
 PILE_NEAR = 0.98
+""""At the extreme" of a direction: within 2 % of it."""
 PILE_MIN_SWINGS = 4
-"""A clipped direction reaches within 2 % (``PILE_NEAR``) of its extreme in at least this many
-separate stretches, ``SWING_GAP_S`` apart or more..."""
+"""A direction clips if it is at its extreme in at least this many separate stretches..."""
 SWING_GAP_S = 0.02
+"""... (stretches less than this apart are one)..."""
 PLATEAU_MIN_S = 0.04
-"""... or holds within 2 % of it for this long in one stretch..."""
+"""... or in one stretch this long, s..."""
 CLIP_LEVEL_SHARE = 0.9
 """... and its extreme is within 10 % of the largest rate on any axis of the recording."""
 CLIPPED_RATE_SIGMA_SHARE = 0.15
