@@ -267,6 +267,13 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument(
         "-o", "--output", type=Path, required=True, metavar="TRACK.csv", help="where to write"
     )
+    export.add_argument(
+        "--steps",
+        type=Path,
+        metavar="STEPS.csv",
+        help="also write one row per step: displacement, heading change and their covariance (OpenShoe's "
+        "stepwise output), length, duration, clearance",
+    )
     _add_recording_args(export)
 
     evaluate = sub.add_parser("evaluate", help="accuracy on recordings with ground truth or a closed loop")
@@ -330,6 +337,7 @@ def _export(args: argparse.Namespace) -> int:
             profile=args.profile,
             smooth=args.smooth,
             stance_levels=args.stance_levels,
+            steps_out=args.steps,
         )
     )
     return 0

@@ -22,6 +22,7 @@ from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavConfig, NavStats, navigate
 from pipeline.profiles import get_profile
 from pipeline.saturation import reconstruct_saturated_rates
+from pipeline.steps import segment_steps
 from pipeline.swing_clearance import swing_clearance
 from pipeline.tof_aiding import TofConfig
 
@@ -106,6 +107,79 @@ def write_track_csv(nav: NavBatch, path: Path) -> None:
         raise FootnavError(f"cannot write {path}: {exc.strerror}") from None
 
 
+STEP_COLUMNS = (
+    "t",
+    "index",
+    "dx",
+    "dy",
+    "dz",
+    "dyaw",
+    "is_step",
+    "length",
+    "duration",
+    "clearance_max",
+    "x",
+    "y",
+    "z",
+    "yaw",
+    "c_xx",
+    "c_xy",
+    "c_xz",
+    "c_xyaw",
+    "c_yy",
+    "c_yz",
+    "c_yyaw",
+    "c_zz",
+    "c_zyaw",
+    "c_yawyaw",
+)
+"""``--steps``: OpenShoe's stepwise output computed from the track (``pipeline.steps``), one row per
+step epoch (the end of a stance): its time and sample index in the track; the displacement since the
+previous epoch in that epoch's heading frame (x forward, z up), m, and the heading change, rad;
+whether it is a step (5 cm or more; else standing); its horizontal length, m, and duration, s; the
+largest clearance between the two epochs, m; the position and heading at the epoch (navigation
+frame); and the upper triangle of the 4×4 covariance of (dx, dy, dz, dyaw), m² and rad² (empty for
+a smoothed track: the smoother gives no covariance between two epochs, which a step's needs)."""
+
+
+def write_steps_csv(nav: NavBatch, path: Path, *, with_covariance: bool = True) -> str:
+    """Write ``STEP_COLUMNS`` for the steps of ``nav``; returns what was written, for the summary."""
+    assert nav.cov_pos_yaw is not None
+    steps = segment_steps(nav.t_s, nav.pos_n_m, nav.quat_nb_wxyz, nav.stance, nav.cov_pos_yaw)
+    starts = np.concatenate([[0], steps.index[:-1]])
+    duration = steps.t_s - nav.t_s[starts]
+    clearance = np.array([float(np.max(nav.clearance_m[a : b + 1])) for a, b in zip(starts, steps.index, strict=True)])
+    upper = np.triu_indices(4)
+    cov = steps.cov[:, upper[0], upper[1]] if with_covariance else np.full((len(steps), 10), np.nan)
+    table = np.column_stack(
+        [
+            steps.t_s,
+            steps.index,
+            steps.dpos_step_m,
+            steps.dyaw_rad,
+            steps.is_step,
+            np.linalg.norm(steps.dpos_step_m[:, :2], axis=1),
+            duration,
+            clearance,
+            steps.pos_n_m,
+            steps.yaw_rad,
+            cov,
+        ]
+    )
+    integer = {STEP_COLUMNS.index("index"), STEP_COLUMNS.index("is_step")}
+    try:
+        with path.open("w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(STEP_COLUMNS)
+            for row in table:
+                writer.writerow(
+                    [int(v) if i in integer else ("" if np.isnan(v) else f"{v:.9g}") for i, v in enumerate(row)]
+                )
+    except OSError as exc:
+        raise FootnavError(f"cannot write {path}: {exc.strerror}") from None
+    return f"{int(np.count_nonzero(steps.is_step))} steps ({len(steps)} rows) to {path}"
+
+
 def run_export(
     source: Path,
     out: Path,
@@ -115,8 +189,10 @@ def run_export(
     profile: str | None,
     smooth: bool,
     stance_levels: bool = True,
+    steps_out: Path | None = None,
 ) -> str:
-    """Load, navigate and write; returns a one-line summary."""
+    """Load, navigate and write the track (and, with ``steps_out``, its steps); returns a one-line
+    summary."""
     if _is_capture(source):
         options = (("--format", fmt), ("--columns", columns), ("--profile", profile))
         given = [name for name, v in options if v] + ([] if stance_levels else ["--no-stance-levels"])
@@ -130,10 +206,11 @@ def run_export(
                 f"{source} is a footnav capture: --smooth is not available for captures (the smoother does not "
                 "take the ToF channel); drop it for the live estimates"
             )
-        return export_capture(source, out)
+        return export_capture(source, out, steps_out)
     rec = load_recording(source, fmt, CsvMapping.parse(columns) if columns else None)
     nav, stats = navigate_recording(rec, profile, smooth, stance_levels)
     write_track_csv(nav, out)
+    steps = "" if steps_out is None else f", {write_steps_csv(nav, steps_out, with_covariance=not smooth)}"
     skipped = (
         f", {stats.samples_before_alignment} samples before the first still period not navigated"
         if stats.samples_before_alignment
@@ -141,7 +218,7 @@ def run_export(
     )
     handled = f"; {h}" if (h := input_handling(stats)) else ""
     return (
-        f"wrote {len(nav)} rows to {out} ({rec.format} recording, profile {profile or rec.profile}{skipped})"
+        f"wrote {len(nav)} rows to {out}{steps} ({rec.format} recording, profile {profile or rec.profile}{skipped})"
         f"{handled}"
     )
 
@@ -155,9 +232,10 @@ def _is_capture(path: Path) -> bool:
         return False  # the loaders say what is wrong with it
 
 
-def export_capture(source: Path, out: Path) -> str:
+def export_capture(source: Path, out: Path, steps_out: Path | None = None) -> str:
     """Replay a footnav capture headless and write each foot's rows (``out`` for one foot, else
-    ``<stem>-<foot><suffix>`` beside it); returns a one-line summary."""
+    ``<stem>-<foot><suffix>`` beside it) and, with ``steps_out``, its steps (named alike); returns a
+    one-line summary."""
     from app.config import defaults
     from app.replay import ReplayOptions, run_replay
     from views.convert import concat_batches
@@ -178,4 +256,7 @@ def export_capture(source: Path, out: Path) -> str:
         nav = concat_batches(got[foot])
         write_track_csv(nav, path)
         written.append(f"{len(nav)} rows to {path}{' with clearance' if nav.floor_z_m is not None else ''}")
+        if steps_out is not None:
+            spath = steps_out if len(feet) == 1 else steps_out.with_name(f"{steps_out.stem}-{foot}{steps_out.suffix}")
+            written.append(write_steps_csv(nav, spath))
     return f"wrote {'; '.join(written)} (footnav capture, replayed)"

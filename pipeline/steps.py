@@ -5,11 +5,14 @@ previous reset in the frame whose heading was zeroed then, the heading change, a
 covariance of (x, y, z, ψ) accumulated since the reset, after which it zeroes position, heading and
 their covariance (``warrenwhipple/3dpen:nav_eq.c``; protocol-openshoe.md §5.1). Here the epochs are
 the last sample of every stance that lasts at least ``min_stance_s`` and comes at least
-``min_interval_s`` after the previous epoch; the increment is rotated into the previous epoch's
-heading frame, and its covariance is the growth of the (x, y, z, ψ) covariance block between the two
-epochs, rotated the same way (the firmware's reset makes its dP the same growth; like the firmware,
-this neglects the cross-covariance between consecutive epochs). Increments under 5 cm are marked as
-standing, not steps, as the vendor's host apps do.
+``min_interval_s`` after the previous epoch (any detected stance by default: a running stance lasts
+5-25 ms, and the detector's debounce already drops a swing's brief dips; with 50 ms the PyShoe
+running trial's 0.73 s strides came out as 14 steps of 1.9 s instead of 34); the increment is
+rotated into the previous epoch's heading frame, and its covariance is the growth of the (x, y, z, ψ)
+covariance block between the two epochs, rotated the same way (the firmware's reset makes its dP the
+same growth; like the firmware, this neglects the cross-covariance between consecutive epochs).
+Increments under 5 cm are marked as standing, not steps, as the vendor's host apps do. ``footnav
+export --steps`` writes them (``app.export.STEP_COLUMNS``).
 """
 
 from __future__ import annotations
@@ -60,7 +63,7 @@ def _rot2(yaw: F64) -> F64:
 
 
 def step_epochs(
-    t_s: F64, stance: NDArray[np.bool_], min_stance_s: float = 0.05, min_interval_s: float = 0.4
+    t_s: F64, stance: NDArray[np.bool_], min_stance_s: float = 0.0, min_interval_s: float = 0.4
 ) -> NDArray[np.int64]:
     """Indices of the last sample of each qualifying stance (see the module docstring)."""
     s = stance.astype(np.int8)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import math
 import os
 import signal
@@ -17,6 +18,7 @@ from mcap.writer import Writer
 
 from app.config import defaults
 from app.demo import DemoOptions, run_demo
+from app.export import run_export
 from app.replay import ReplayOptions, run_replay
 from device.capture import (
     FLUSH_PERIOD_S,
@@ -94,6 +96,16 @@ def test_two_feet_capture_replays_both(tmp_path: Path) -> None:
     # which the window still holds (mid-walk the foot never rests the 0.5 s it needs)
     part = replay(path, start_s=1.0, end_s=8.0)["left"]
     assert 1.0 <= part.t_s[0] < 1.002 and 7.998 < part.t_s[-1] <= 8.0
+    # exported with --steps: a track and a steps file per foot, named by the foot
+    summary = run_export(
+        path, tmp_path / "t.csv", fmt=None, columns=None, profile=None, smooth=False, steps_out=tmp_path / "s.csv"
+    )
+    for foot in ("left", "right"):
+        assert (tmp_path / f"t-{foot}.csv").exists()
+        with (tmp_path / f"s-{foot}.csv").open() as f:
+            rows = list(csv.DictReader(f))
+        assert sum(int(r["is_step"]) for r in rows) >= 4, summary
+        assert all(r["c_xx"] for r in rows)
 
 
 def test_capture_holds_both_directions_and_header(tmp_path: Path) -> None:

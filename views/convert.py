@@ -126,6 +126,11 @@ def concat_batches(batches: Sequence[NavBatch]) -> NavBatch:
         detector_threshold=np.concatenate([np.broadcast_to(b.detector_threshold, (len(b),)) for b in batches]),
         clearance_m=np.concatenate([b.clearance_m for b in batches]),
         host_ns=np.concatenate([b.host_ns for b in batches]),
+        cov_pos_yaw=(
+            np.concatenate([b.cov_pos_yaw for b in batches if b.cov_pos_yaw is not None])
+            if all(b.cov_pos_yaw is not None for b in batches)
+            else None
+        ),
     )
 
 
