@@ -339,3 +339,6 @@ def apply_capture_settings(cfg: Config, nav_json: dict[str, Any], source: str) -
     if isinstance(filter_table, dict) and "stance_levels" not in filter_table:
         # recorded before the stance height levels existed: its live estimates had none
         cfg.set("filter.stance_levels", False, f"{source} (recorded before stance levels)")
+    if isinstance(filter_table, dict) and "gravity_mps2" not in filter_table:
+        # recorded before gravity was configured: its live estimates took |f| at rest for gravity
+        cfg.set("filter.gravity_mps2", 0.0, f"{source} (recorded before gravity_mps2)")

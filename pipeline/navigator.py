@@ -25,7 +25,7 @@ from pipeline.clearance import StrideClearance, StrideClearanceTracker
 from pipeline.detectors import DetectorParams, StreamingDetector
 from pipeline.height_detector import HeightStanceDetector
 from pipeline.nav_types import NavBatch
-from pipeline.profiles import UnitProfile, get_profile
+from pipeline.profiles import G0_MPS2, UnitProfile, get_profile
 from pipeline.samples import ImuBatch
 from pipeline.saturation import clipped_rate_variance
 from pipeline.stance_levels import StanceLevelParams, StanceLevels
@@ -69,6 +69,12 @@ class NavConfig:
         stance_levels: apply the stance height constraint (``pipeline.stance_levels``: a stance on the
             floor of the last one is at its height; height changes of a stair or more are kept).
             With ToF readings their own floor levels (``pipeline.tof_aiding``) take its place.
+        gravity_mps2: the magnitude of gravity where the unit walks, m/s² (standard gravity by default:
+            within 0.27 % of the value anywhere at sea level, Groves 2013 §2.4.7). The accelerometer's
+            reading at rest differs from it by its bias, which the filter then estimates: taking |f̄| of
+            the still start for gravity instead (0 or less here, as before 2026-12) hides the bias
+            along gravity in g, where the filter's bias states cannot see it, and turns it into an
+            unmodelled error as soon as the foot tilts (README "Accuracy", the consistency paragraph).
     """
 
     profile: UnitProfile = field(default_factory=lambda: get_profile("mpu6500x4"))
@@ -83,6 +89,7 @@ class NavConfig:
     init_yaw_sigma_rad: float = math.radians(0.01)
     max_wait_s: float = 30.0
     stance_levels: bool = True
+    gravity_mps2: float = G0_MPS2
 
 
 @dataclass
@@ -276,7 +283,8 @@ class Navigator:
         x[6:10] = al.quat_nb_wxyz  # biases start at the profile's prior, 0: a quiet foot may still turn
         self._x = x
         self._P = np.diag(initial_error_sigmas(cfg, prof) ** 2)
-        self._par = filter_parameters(prof, self.rate_hz, al.gravity_mps2, cfg.dt_max_s)
+        gravity = cfg.gravity_mps2 if cfg.gravity_mps2 > 0.0 else al.gravity_mps2
+        self._par = filter_parameters(prof, self.rate_hz, gravity, cfg.dt_max_s)
         self.stats.aligned_at_s = float(batch.t_s[start])
         self._t_last = float(batch.t_s[start]) - 1.0 / self.rate_hz  # one nominal interval before
         rest = batch.select(slice(start, None))

@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass
 
 DEG = math.pi / 180.0
-G0_MPS2 = 9.80665  # standard gravity (CGPM 1901); the filter re-measures |g| during alignment
+G0_MPS2 = 9.80665  # standard gravity (CGPM 1901); the navigator's default gravity (NavConfig.gravity_mps2)
 
 
 @dataclass(frozen=True, slots=True)

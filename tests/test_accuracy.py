@@ -85,7 +85,8 @@ def test_a_mid_swing_stance_is_not_taken(shared_data: Path, monkeypatch: pytest.
 
 def test_closed_loops(evaluations) -> None:  # type: ignore[no-untyped-def]
     xio, openshoe = evaluations["short_walk"], evaluations["data_inert"]
-    # measured 3D / 2D: x-io 0.050 / 0.050 m, OpenShoe 0.099 / 0.099 m with the stance height
+    # measured 3D / 2D: x-io 0.050 / 0.050 m, OpenShoe 0.097 / 0.097 m (0.099 with |f| at rest for
+    # gravity, pipeline.navigator.NavConfig.gravity_mps2) with the stance height
     # constraint (pipeline.stance_levels); without it 0.248 / 0.054 and 0.776 / 0.102 m (0.248 / 0.051
     # and 0.774 / 0.094 with the earlier ZARU gate, pipeline.eskf; 0.261 / 0.052 and 0.838 / 0.090
     # with a hard vertical ZUPT)

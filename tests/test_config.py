@@ -83,6 +83,21 @@ def test_a_capture_recorded_before_the_stance_levels_replays_without_them() -> N
     assert now.nav_config().stance_levels is True
 
 
+def test_a_capture_recorded_before_gravity_was_configured_replays_with_the_gravity_it_measured() -> None:
+    """Its live estimates took |f| at rest for gravity (``NavConfig.gravity_mps2`` ≤ 0), so its replay
+    does too; a capture of today replays with the gravity it recorded."""
+    recorded = defaults().to_json()
+    assert recorded["filter"]["gravity_mps2"] == 9.80665
+    del recorded["filter"]["gravity_mps2"]
+    replay = defaults()
+    apply_capture_settings(replay, recorded, "capture old.mcap")
+    assert replay.nav_config().gravity_mps2 == 0.0
+    assert "before gravity_mps2" in replay.source("filter.gravity_mps2")
+    now = defaults()
+    apply_capture_settings(now, defaults().to_json(), "capture new.mcap")
+    assert now.nav_config().gravity_mps2 == 9.80665
+
+
 @pytest.mark.parametrize(
     ("text", "needle"),
     [

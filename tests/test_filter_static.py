@@ -57,6 +57,29 @@ def test_rest_stays_put_and_bias_is_estimated() -> None:
     assert np.all(np.linalg.eigvalsh(out.pos_cov_n_m2[-1]) > 0)
 
 
+def test_accelerometer_bias_along_gravity_is_estimated_against_the_configured_gravity() -> None:
+    """At rest the accelerometer reads gravity plus its bias: against a known gravity (standard by
+    default, ``NavConfig.gravity_mps2``) the zero-velocity updates see the bias along gravity and the
+    filter estimates it; taking |f| at rest for gravity (0) hides it in g, and the bias state stays at 0."""
+    from pipeline.navigator import Navigator
+    from pipeline.samples import ImuBatch
+
+    t, acc, gyr = _still(10_000, 0.3, -0.2, np.zeros(3))
+    mat_nb = quat_to_mat(quat_from_euler_zyx(0.3, -0.2, 0.0))
+    bias_b = 4e-3 * 9.80665 * mat_nb.T[:, 2]  # 4 mg along gravity
+    n = t.size
+    estimates = []
+    for gravity in (9.80665, 0.0):
+        nav = Navigator(NavConfig(gravity_mps2=gravity), RATE_HZ)
+        out = nav.process(ImuBatch(t, acc + bias_b, gyr, np.arange(n), np.zeros(n, dtype=np.int64)))
+        state = nav.state
+        assert out is not None and state is not None and np.abs(out.pos_n_m).max() < 1e-3
+        estimates.append(state[10:13] @ mat_nb.T[:, 2])  # the bias estimate along gravity
+    known, measured = estimates
+    assert known == pytest.approx(4e-3 * 9.80665, rel=0.05)
+    assert abs(measured) < 0.05 * 4e-3 * 9.80665
+
+
 def test_gyro_bias_is_tracked_after_alignment() -> None:
     # alignment sees no bias; the bias then steps (e.g. warm-up) and ZARU must find it
     # With the mpu6500x4 profile's bias random walk the steady-state gain gives a time constant of
