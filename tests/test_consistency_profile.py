@@ -21,7 +21,6 @@ def test_per_sample_noise_and_bias_terms_match_the_emulator(rate_hz: float) -> N
     assert par[eskf.PAR_SIG_ACC] == pytest.approx(grade.acc_noise_sigma_mps2(rate_hz), rel=1e-12)
     assert par[eskf.PAR_SIG_GYR] == pytest.approx(grade.gyr_noise_sigma_radps(rate_hz), rel=1e-12)
     assert par[eskf.PAR_ACC_SCALE] == 0.0 and par[eskf.PAR_GYR_SCALE] == 0.0
-    assert par[eskf.PAR_ROLL_LEVER] == 0.0  # the emulated foot stands exactly still: it does not roll
     # the Gauss-Markov drift's driving density: its variance grows 2 σ² t / τ for t ≪ τ
     tau = grade.bias_correlation_time_s
     assert par[eskf.PAR_BG_RW] ** 2 * tau == pytest.approx(2.0 * grade.gyr_bias_instability_radps**2, rel=1e-12)
