@@ -22,10 +22,9 @@ Two noise models are run on the same records:
 - ``emulated``: a profile holding exactly the emulator's error model
   (:func:`profile_of_grade`): its white-noise densities (one-sided, so σ² per sample is density² ·
   rate / 2), turn-on biases, and the Gauss-Markov drift as a bias random walk of the same driving
-  density; no signal-proportional, vibration or residual-rotation terms, and no allowance for a foot
-  rolling over heel and toe in stance (the emulated foot stands exactly still, ``device.emulator.gait``).
-  The soft vertical zero-velocity update is kept (the emulated heel strike), and so is its 1 cm/s
-  (the detector's stance edges hold samples of a foot still moving).
+  density; no signal-proportional, vibration or residual-rotation terms. The zero-velocity update's
+  own model (the foot rolling about heel and toe, the soft vertical update) is kept: the emulated
+  gait has both.
 
 The samples of one walk are strongly correlated in time, so the share inside the band is a
 description, not a test at 95 %.
@@ -76,7 +75,6 @@ def profile_of_grade(grade: ImuGrade, base: UnitProfile) -> UnitProfile:
         acc_scale_error=0.0,
         gyr_scale_error=0.0,
         zaru_sigma_radps=0.0,
-        roll_lever_m=0.0,
     )
 
 
