@@ -9,7 +9,7 @@ clearance too (:data:`CLEARANCE_COLUMNS`).
 from __future__ import annotations
 
 import csv
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import numpy as np
@@ -96,13 +96,17 @@ def write_track_csv(nav: NavBatch, path: Path) -> None:
         columns += [nav.clearance_m, swing, nav.floor_z_m]
         names = EXPORT_COLUMNS + CLEARANCE_COLUMNS
     table = np.column_stack(columns)
+    stance_col = EXPORT_COLUMNS.index("stance")
+    _write_csv(path, names, ([int(v) if i == stance_col else f"{v:.9g}" for i, v in enumerate(row)] for row in table))
+
+
+def _write_csv(path: Path, header: tuple[str, ...], rows: Iterable[list[int | str]]) -> None:
+    """``header`` and ``rows`` to ``path``; a file that cannot be written is a ``FootnavError``."""
     try:
         with path.open("w", newline="") as f:
             writer = csv.writer(f)
-            writer.writerow(names)
-            stance_col = EXPORT_COLUMNS.index("stance")
-            for row in table:
-                writer.writerow([int(v) if i == stance_col else f"{v:.9g}" for i, v in enumerate(row)])
+            writer.writerow(header)
+            writer.writerows(rows)
     except OSError as exc:
         raise FootnavError(f"cannot write {path}: {exc.strerror}") from None
 
@@ -167,16 +171,11 @@ def write_steps_csv(nav: NavBatch, path: Path, *, with_covariance: bool = True) 
         ]
     )
     integer = {STEP_COLUMNS.index("index"), STEP_COLUMNS.index("is_step")}
-    try:
-        with path.open("w", newline="") as f:
-            writer = csv.writer(f)
-            writer.writerow(STEP_COLUMNS)
-            for row in table:
-                writer.writerow(
-                    [int(v) if i in integer else ("" if np.isnan(v) else f"{v:.9g}") for i, v in enumerate(row)]
-                )
-    except OSError as exc:
-        raise FootnavError(f"cannot write {path}: {exc.strerror}") from None
+    _write_csv(
+        path,
+        STEP_COLUMNS,
+        ([int(v) if i in integer else ("" if np.isnan(v) else f"{v:.9g}") for i, v in enumerate(row)] for row in table),
+    )
     return f"{int(np.count_nonzero(steps.is_step))} steps ({len(steps)} rows) to {path}"
 
 
