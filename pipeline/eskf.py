@@ -82,8 +82,8 @@ its zero-velocity updates; gating those too (every sample at NIS 150, or 1.2 m/s
 A sample whose rate was clipped at the sensor's range (``pipeline.saturation``, whole recordings)
 is uncertain along its own body axis: ``run_filter`` adds R diag(σ_i²) Rᵀ dt² to the attitude block
 of Q there, σ_i a share of the rate on each clipped axis i (``gyr_clip_var_b``), so the tilt a
-clipped pitch rate leaves is one the next stance's updates can explain, and the heading is not made
-uncertain by it.
+clipped pitch rate leaves is one the next stance's updates can explain; the heading is made
+uncertain only as far as that axis points up (isotropic noise made it uncertain by the full amount).
 
 The covariance propagation multiplies only the non-identity blocks of F and writes one triangle
 (about 800 multiply-adds per sample instead of 2 × 15³); the updates observe three states each, so

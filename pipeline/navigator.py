@@ -70,7 +70,8 @@ class NavConfig:
             floor of the last one is at its height; height changes of a stair or more are kept).
             With ToF readings their own floor levels (``pipeline.tof_aiding``) take its place.
         gravity_mps2: the magnitude of gravity where the unit walks, m/s² (standard gravity by default:
-            within 0.27 % of the value anywhere at sea level, Groves 2013 §2.4.7). The accelerometer's
+            within 0.27 % of the value anywhere at sea level, 9.780 at the equator to 9.832 at the
+            poles in the WGS 84 model, Groves 2013 ch. 2). The accelerometer's
             reading at rest differs from it by its bias, which the filter then estimates: taking |f̄| of
             the still start for gravity instead (0 or less here, as before 2026-12) hides the bias
             along gravity in g, where the filter's bias states cannot see it, and turns it into an
