@@ -65,8 +65,10 @@ def test_evaluate_prints_a_table_and_summary(shared_data: Path) -> None:
     assert proc.returncode == 0, proc.stderr
     assert "ARMSE2D" in proc.stdout and "data_inert" in proc.stdout and "2017-11-22-11-22-03" in proc.stdout
     assert "ground truth (1 files)" in proc.stdout and "closed loops (1 files)" in proc.stdout
-    # the handling of doubtful input, per file: this trial has a 1-sample mid-swing "stance"
+    # the handling of doubtful input, per file: this trial has a 1-sample mid-swing "stance", and its
+    # gyroscope clips on the pitch axis (pipeline.saturation)
     assert re.search(r"input handling:\n(  .*\n)*  2017-11-22-11-22-03: .*1 zero-velocity samples skipped", proc.stdout)
+    assert "82 gyroscope values taken as clipped at the sensor's range (36 raised by the reconstruction" in proc.stdout
 
 
 def test_evaluate_without_the_stance_levels(shared_data: Path) -> None:
