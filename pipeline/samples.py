@@ -20,8 +20,9 @@ class ImuBatch:
         gyr_b_radps: (n, 3) angular rate in the body frame, rad/s.
         counter: (n,) packet counter as sent by the unit (for gap accounting).
         host_ns: (n,) host receive time, ``time.monotonic_ns()`` of the read that completed the packet.
-        gyr_clipped_b: (n, 3) which rates were cut off at the sensor's range and reconstructed, or None
-            (not known: live streams; found in whole recordings by ``pipeline.saturation``).
+        gyr_clipped_b: (n, 3) which rates were cut off at the sensor's range (reconstructed where they
+            could be), or None (not known: live streams; found in whole recordings by
+            ``pipeline.saturation``).
     """
 
     t_s: F64
