@@ -330,9 +330,11 @@ def finish_capture(capture: CaptureWriter | None, runs: Sequence[FootRun]) -> No
 
 
 def dual_nav_config(nav_config: NavConfig, lever_b_m: tuple[float, float, float]) -> DualNavConfig:
-    """The dual-IMU navigator's settings from the single-IMU ones (same profile and detector)."""
+    """The dual-IMU navigator's settings from the single-IMU ones (same profile, detector and gravity)."""
     return DualNavConfig(
-        filter=DualEskfConfig(profile=nav_config.profile), detector=nav_config.detector, lever_b_m=lever_b_m
+        filter=DualEskfConfig(profile=nav_config.profile, gravity_mps2=nav_config.gravity_mps2),
+        detector=nav_config.detector,
+        lever_b_m=lever_b_m,
     )
 
 

@@ -73,7 +73,7 @@ from pipeline.navigator import (
     ZUPT_GATE_RATIO,
     initial_error_sigmas,
 )
-from pipeline.profiles import UnitProfile, get_profile
+from pipeline.profiles import G0_MPS2, UnitProfile, get_profile
 from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s, quat_to_mat_into
 
 F64 = NDArray[np.float64]
@@ -148,6 +148,8 @@ class DualEskfConfig:
         align_s: still time at the start of the record used for the alignment, s.
         init_pos_sigma_m, init_vel_sigma_mps, init_tilt_sigma_rad, init_yaw_sigma_rad: initial 1σ.
         dt_max_s: longer intervals are gaps, integrated as this long (``eskf.sample_intervals``), s.
+        gravity_mps2: the local gravity, m/s²; 0 or less: the still start's |f̄| (as
+            ``pipeline.navigator.NavConfig.gravity_mps2``).
     """
 
     profile: UnitProfile = field(default_factory=lambda: get_profile("generic"))
@@ -157,6 +159,7 @@ class DualEskfConfig:
     init_vel_sigma_mps: float = 0.01
     init_tilt_sigma_rad: float = math.radians(0.5)
     init_yaw_sigma_rad: float = math.radians(0.01)
+    gravity_mps2: float = G0_MPS2
 
 
 @dataclass(frozen=True, slots=True)
@@ -550,7 +553,7 @@ class DualEskfStream:
         self.x = x
         self.P = np.diag(sig**2)
         self.aux = np.zeros(N_AUX)
-        self.par = dual_parameters(prof, rate_hz, al.gravity_mps2)
+        self.par = dual_parameters(prof, rate_hz, cfg.gravity_mps2 if cfg.gravity_mps2 > 0.0 else al.gravity_mps2)
         self.counters = np.zeros(N_CNT, dtype=np.int64)
         self._imu_ok: list[NDArray[np.bool_]] = []
         self._t: list[F64] = []

@@ -58,7 +58,7 @@ def _navigate_in_batches(
 def test_dual_navigator_stance_levels_hold_the_height_however_batched() -> None:
     """With the gyroscopes' datasheet scale and cross-axis errors the board's height drifts; the stance
     height constraint holds it on the floor of the rectangle (stance height error 0.14 / 0.37 cm RMS
-    with seeds 1 / 2, against 5.5 / 21.8 cm; on the stairs 0.39 / 2.0 cm against 2.7 / 11.6 cm), and
+    with seeds 1 / 2, against 5.6 / 21.8 cm; on the stairs 0.39 / 2.0 cm against 2.8 / 11.6 cm), and
     batching changes nothing."""
     rec = simulate_dual_imu("rectangle", seed=1, axes="gyro-bias-calibrated")
     true_z = rec.truth.imu1.pos_n_m[:, 2]
