@@ -28,13 +28,19 @@ class Alignment:
 
     Attributes:
         quat_nb_wxyz: (4,) initial attitude (yaw 0).
-        gravity_mps2: |mean specific force| over the still window, used as local g.
+        gravity_mps2: |mean specific force| over the still window (gravity plus the accelerometer's
+            bias along it).
         gyr_bias_radps: (3,) mean angular rate over the window (the foot is still).
     """
 
     quat_nb_wxyz: F64
     gravity_mps2: float
     gyr_bias_radps: F64
+
+    def gravity_for(self, configured_mps2: float) -> float:
+        """The g a filter navigates with: the configured local gravity, or, when that is 0 or less,
+        this window's |f̄| (``pipeline.navigator.NavConfig.gravity_mps2``)."""
+        return configured_mps2 if configured_mps2 > 0.0 else self.gravity_mps2
 
 
 def align_from_still(acc_b_mps2: F64, gyr_b_radps: F64) -> Alignment:

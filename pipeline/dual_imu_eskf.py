@@ -553,7 +553,7 @@ class DualEskfStream:
         self.x = x
         self.P = np.diag(sig**2)
         self.aux = np.zeros(N_AUX)
-        self.par = dual_parameters(prof, rate_hz, cfg.gravity_mps2 if cfg.gravity_mps2 > 0.0 else al.gravity_mps2)
+        self.par = dual_parameters(prof, rate_hz, al.gravity_for(cfg.gravity_mps2))
         self.counters = np.zeros(N_CNT, dtype=np.int64)
         self._imu_ok: list[NDArray[np.bool_]] = []
         self._t: list[F64] = []

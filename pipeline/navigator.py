@@ -284,8 +284,7 @@ class Navigator:
         x[6:10] = al.quat_nb_wxyz  # biases start at the profile's prior, 0: a quiet foot may still turn
         self._x = x
         self._P = np.diag(initial_error_sigmas(cfg, prof) ** 2)
-        gravity = cfg.gravity_mps2 if cfg.gravity_mps2 > 0.0 else al.gravity_mps2
-        self._par = filter_parameters(prof, self.rate_hz, gravity, cfg.dt_max_s)
+        self._par = filter_parameters(prof, self.rate_hz, al.gravity_for(cfg.gravity_mps2), cfg.dt_max_s)
         self.stats.aligned_at_s = float(batch.t_s[start])
         self._t_last = float(batch.t_s[start]) - 1.0 / self.rate_hz  # one nominal interval before
         rest = batch.select(slice(start, None))
