@@ -14,7 +14,7 @@ and Navigation", Wiley 2001, §5.4.2, eqs. 5.4.2-3 to -6). Printed: the median A
 filter gives d) and the share of seconds inside, below (covariance too large) and above (too small)
 the band, for the 3D position, the horizontal pair and the height.
 
-Two noise models are run on the same records:
+Three models are run on the same records:
 
 - ``default``: the unit profile footnav navigates with (``pipeline.profiles``), which adds process
   noise for what real units have and the emulator does not (scale factor, cross-axis, vibration,
@@ -25,6 +25,10 @@ Two noise models are run on the same records:
   density; no signal-proportional, vibration or residual-rotation terms. The zero-velocity update's
   own model (the foot rolling about heel and toe, the soft vertical update) is kept: the emulated
   gait has both.
+- ``true st.``: that profile without the update's stance terms (:func:`with_true_stances`), the
+  filter run on the walk's true stances instead of the detector's (:func:`navigate_true_stances`):
+  the filter where its whole model holds but the drift (a Gauss-Markov process taken as a random
+  walk, which overstates it at 240 s). What separates it from ``emulated`` is the stance detection.
 
 The samples of one walk are strongly correlated in time, so the share inside the band is a
 description, not a test at 95 %.
@@ -40,9 +44,11 @@ import time
 import numpy as np
 from scipy.stats import chi2
 
-from device.emulator.gait import simulate_walk
+from device.emulator.gait import GaitTruth, simulate_walk
 from device.emulator.imu_errors import AXIS_ERRORS, IMU_GRADES, ImuGrade, corrupt
-from pipeline.navigator import NavConfig, navigate
+from pipeline import eskf
+from pipeline.alignment import align_from_still
+from pipeline.navigator import NO_CLIPPED_RATES, NavConfig, filter_parameters, initial_error_sigmas, navigate
 from pipeline.profiles import UnitProfile, get_profile
 
 F64 = np.ndarray
@@ -50,6 +56,9 @@ WALKS = ("rectangle", "figure8")
 RATE_HZ = 1000.0
 GRADE = "mpu6500x4"
 COMPONENTS = (("3D", slice(0, 3)), ("xy", slice(0, 2)), ("z", slice(2, 3)))
+TRUE_STANCE_ZUPT_SIGMA_MPS = 1e-3
+"""The zero-velocity noise where the IMU is exactly still: small, not zero, for the update's
+numerics."""
 
 
 def profile_of_grade(grade: ImuGrade, base: UnitProfile) -> UnitProfile:
@@ -78,20 +87,69 @@ def profile_of_grade(grade: ImuGrade, base: UnitProfile) -> UnitProfile:
     )
 
 
+def with_true_stances(profile: UnitProfile) -> UnitProfile:
+    """``profile`` with the zero-velocity update's model of a detected stance removed (no roll about
+    heel or toe, no soft vertical component, 1 mm/s of noise): the model of the emulator's true
+    stances, in which the IMU is exactly still."""
+    return dataclasses.replace(
+        profile,
+        name=f"{profile.name} (true stances)",
+        roll_lever_m=0.0,
+        zupt_vertical_sigma_mps=0.0,
+        zupt_sigma_mps=TRUE_STANCE_ZUPT_SIGMA_MPS,
+    )
+
+
+def navigate_true_stances(truth: GaitTruth, acc_b_mps2: F64, gyr_b_radps: F64, profile: UnitProfile) -> tuple[F64, F64]:
+    """The filter alone over emulated samples with the walk's true stances instead of a detector,
+    aligned on the first ``NavConfig.align_s`` of the (still) start as the navigator would be.
+
+    Returns: (n, 3) positions and (n, 3, 3) position covariances of the samples after alignment.
+    """
+    cfg = NavConfig(profile=profile)
+    start = max(2, round(cfg.align_s * RATE_HZ))
+    al = align_from_still(acc_b_mps2[:start], gyr_b_radps[:start])
+    x = np.zeros(eskf.N_STATE + 1)
+    x[6:10] = al.quat_nb_wxyz
+    P = np.diag(initial_error_sigmas(cfg, profile) ** 2)
+    par = filter_parameters(profile, RATE_HZ, al.gravity_for(cfg.gravity_mps2), cfg.dt_max_s)
+    n = truth.t_s.shape[0] - start
+    pos, vel, quat, cov = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
+    eskf.run_filter(
+        x, P, acc_b_mps2[start:], gyr_b_radps[start:], NO_CLIPPED_RATES,
+        eskf.sample_intervals(truth.t_s[start:], truth.t_s[start - 1], cfg.dt_max_s),
+        np.ascontiguousarray(truth.stance[start:]), np.zeros(n), par, pos, vel, quat, cov,
+        np.zeros(eskf.N_CNT, dtype=np.int64),
+    )  # fmt: skip
+    return pos, cov[:, :3, :3]
+
+
 def nees_per_second(
-    path: str, duration_s: float, runs: int, profile: UnitProfile, axes: str = "none"
+    path: str,
+    duration_s: float,
+    runs: int,
+    profile: UnitProfile,
+    axes: str = "none",
+    *,
+    true_stances: bool = False,
+    grade: ImuGrade | str = GRADE,
 ) -> dict[str, F64]:
     """(runs, seconds) NEES of each component (``COMPONENTS``), from 1 s after alignment, with the
-    emulated IMU's scale-factor and cross-axis errors ``axes`` (``device.emulator.imu_errors``)."""
+    emulated IMU's scale-factor and cross-axis errors ``axes`` (``device.emulator.imu_errors``), through
+    the navigator (its detector's stances) or, with ``true_stances``, the filter on the walk's own."""
     truth = simulate_walk(path, duration_s, rate_hz=RATE_HZ, seed=0)
     out: dict[str, list[F64]] = {name: [] for name, _ in COMPONENTS}
     for seed in range(1, runs + 1):
-        acc, gyr, _ = corrupt(truth.acc_b_mps2, truth.gyr_b_radps, RATE_HZ, GRADE, seed=seed, axes=axes)
-        nav, _ = navigate(truth.t_s, acc, gyr, RATE_HZ, NavConfig(profile=profile))
-        assert nav is not None
+        acc, gyr, _ = corrupt(truth.acc_b_mps2, truth.gyr_b_radps, RATE_HZ, grade, seed=seed, axes=axes)
+        if true_stances:
+            pos, pos_cov = navigate_true_stances(truth, acc, gyr, profile)
+        else:
+            nav, _ = navigate(truth.t_s, acc, gyr, RATE_HZ, NavConfig(profile=profile))
+            assert nav is not None
+            pos, pos_cov = nav.pos_n_m, nav.pos_cov_n_m2
         every = int(RATE_HZ)
-        err = (nav.pos_n_m - truth.pos_n_m[-len(nav) :])[every::every]
-        cov = nav.pos_cov_n_m2[every::every]
+        err = (pos - truth.pos_n_m[-len(pos) :])[every::every]
+        cov = pos_cov[every::every]
         for name, sl in COMPONENTS:
             e, c = err[:, sl], cov[:, sl, sl]
             out[name].append(np.einsum("ni,nij,nj->n", e, np.linalg.inv(c), e))
@@ -119,7 +177,12 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     base = get_profile(GRADE)
-    profiles = (("default", base), ("emulated", profile_of_grade(IMU_GRADES[GRADE], base)))
+    emulated = profile_of_grade(IMU_GRADES[GRADE], base)
+    profiles = (
+        ("default", base, False),
+        ("emulated", emulated, False),
+        ("true st.", with_true_stances(emulated), True),
+    )
     print(
         f"{args.runs} runs per walk, {args.duration:.0f} s, axis errors {args.axis_errors!r}, "
         "ANEES per second against its 95 % band"
@@ -130,8 +193,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(f"{'':<20} " + "  ".join(f"{'median  in/below/above %':>27}" for _ in COMPONENTS))
     for path in WALKS:
-        for label, profile in profiles:
-            nees = nees_per_second(path, args.duration, args.runs, profile, args.axis_errors)
+        for label, profile, true_stances in profiles:
+            nees = nees_per_second(path, args.duration, args.runs, profile, args.axis_errors, true_stances=true_stances)
             cells = []
             for name, sl in COMPONENTS:
                 med, inside, below, above = summary(nees[name], sl.stop - sl.start)
