@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -43,6 +44,8 @@ class NavBatch:
         ranges: the ToF readings handled with these samples and what became of each, else None.
         strides: per-stride clearance of the swings that ended in these samples, else None.
         altitude: barometer pressure altitude of the readings received since the last batch, else None.
+        smoothed: step-smoothed estimates of earlier samples whose step ended in this batch
+            (``pipeline.step_smoother``), else None.
     """
 
     t_s: F64
@@ -60,6 +63,52 @@ class NavBatch:
     ranges: RangeOutputs | None = None
     strides: StrideClearance | None = None
     altitude: PressureAltitude | None = None
+    smoothed: SmoothedSpan | None = None
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
+
+
+@dataclass(frozen=True, slots=True)
+class SmoothedSpan:
+    """Smoothed estimates of consecutive samples already given causally (``pipeline.step_smoother``).
+
+    Attributes:
+        first_sample: index of the first of them among the navigated samples (0: the first sample
+            after alignment).
+        t_s: (m,) their device time, s.
+        pos_n_m, vel_n_mps, quat_nb_wxyz: (m, 3), (m, 3), (m, 4), as in :class:`NavBatch`.
+        cov_pos_yaw: (m, 4, 4) covariance of (x, y, z, ψ).
+        clearance_m: (m,) height of the IMU above the same floor as the causal estimate's, m.
+    """
+
+    first_sample: int
+    t_s: F64
+    pos_n_m: F64
+    vel_n_mps: F64
+    quat_nb_wxyz: F64
+    cov_pos_yaw: F64
+    clearance_m: F64
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+    @staticmethod
+    def concat(spans: list[SmoothedSpan]) -> SmoothedSpan | None:
+        """Consecutive spans joined into one (None for none); raises ValueError if they leave a gap."""
+        if not spans:
+            return None
+        for s0, s1 in itertools.pairwise(spans):
+            if s1.first_sample != s0.first_sample + len(s0):
+                raise ValueError(f"smoothed spans are not consecutive: {s0.first_sample}+{len(s0)}, {s1.first_sample}")
+        if len(spans) == 1:
+            return spans[0]
+        return SmoothedSpan(
+            first_sample=spans[0].first_sample,
+            t_s=np.concatenate([s.t_s for s in spans]),
+            pos_n_m=np.concatenate([s.pos_n_m for s in spans]),
+            vel_n_mps=np.concatenate([s.vel_n_mps for s in spans]),
+            quat_nb_wxyz=np.concatenate([s.quat_nb_wxyz for s in spans]),
+            cov_pos_yaw=np.concatenate([s.cov_pos_yaw for s in spans]),
+            clearance_m=np.concatenate([s.clearance_m for s in spans]),
+        )

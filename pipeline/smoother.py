@@ -354,6 +354,39 @@ def _backward_pass(
                 out_cov[k, r, c] = Ps[pos_yaw[r], pos_yaw[c]]
 
 
+def store_span(
+    x: F64,
+    P: F64,
+    a: int,
+    stop: int,
+    inputs: tuple[F64, F64, F64, F64, NDArray[np.bool_], F64],
+    par: F64,
+    level_updates: list[tuple[int, float]],
+    level_at: list[int],
+    level_r: float,
+    buffers: tuple[F64, F64, F64, F64, F64, F64],
+    work: F64,
+) -> None:
+    """The filter from ``x``, ``P`` (advanced in place) over samples ``a`` .. ``stop`` − 1 of
+    ``inputs`` (acc, gyr, gyr_var, dt, stance, T/γ, indexed alike), stored into ``buffers`` (xf, Pf,
+    xp, Pp, fn, Rm, row 0 = sample ``a``) for :func:`_backward_pass`, with each stance height update
+    (k, z) of ``level_updates`` (``level_at`` their k, sorted) for a ≤ k < stop applied after sample k.
+
+    The run is split after each update's sample: the update runs here, from Python, as in the
+    navigator, so both run the same compiled code (inlined into the pass, LLVM fused its arithmetic
+    differently once the pass came from numba's cache)."""
+    acc, gyr, gyr_var, dt, stance, ratio = inputs
+    xf, Pf, xp, Pp, fn, Rm = buffers
+    lo = a
+    for j in range(bisect.bisect_left(level_at, a), bisect.bisect_left(level_at, stop)):
+        k, z = level_updates[j]
+        _storing_segment(x, P, lo, k + 1, a, acc, gyr, gyr_var, dt, stance, ratio, par, xf, Pf, xp, Pp, fn, Rm)
+        height_update(x, P, -1, z, level_r, work)
+        xf[k - a], Pf[k - a] = x, P
+        lo = k + 1
+    _storing_segment(x, P, lo, stop, a, acc, gyr, gyr_var, dt, stance, ratio, par, xf, Pf, xp, Pp, fn, Rm)
+
+
 class _CheckpointingNavigator(Navigator):
     """The causal ``Navigator``, fed its post-alignment samples in segments with checkpoints.
 
@@ -463,17 +496,8 @@ def smooth_recording(
         for k, z in level_updates[done:]:
             if k < a:  # due after the previous segment's last sample, applied after this checkpoint
                 height_update(x, P, -1, z, level_r, work)
-        # the filter from the checkpoint, split after each stance height update's sample: the update
-        # runs here, from Python, as in the navigator, so both run the same compiled code (inlined
-        # into the pass, LLVM fused its arithmetic differently once the pass came from numba's cache)
-        lo = a
-        for j in range(bisect.bisect_left(level_at, a), bisect.bisect_left(level_at, stop)):
-            k, z = level_updates[j]
-            _storing_segment(x, P, lo, k + 1, a, acc, gyr, gyr_var, dt, stance, ratio, nav._par, xf, Pf, xp, Pp, fn, Rm)
-            height_update(x, P, -1, z, level_r, work)
-            xf[k - a], Pf[k - a] = x, P
-            lo = k + 1
-        _storing_segment(x, P, lo, stop, a, acc, gyr, gyr_var, dt, stance, ratio, nav._par, xf, Pf, xp, Pp, fn, Rm)
+        inputs = (acc, gyr, gyr_var, dt, stance, ratio)
+        store_span(x, P, a, stop, inputs, nav._par, level_updates, level_at, level_r, (xf, Pf, xp, Pp, fn, Rm), work)
         if is_last:
             ds[:] = 0.0
             Ps[:] = Pf[m - 1]
