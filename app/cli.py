@@ -280,7 +280,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument(
         "paths", type=Path, nargs="+", metavar="PATH", help="recordings, or folders of them"
     )
-    evaluate.add_argument("--smooth", action="store_true", help="evaluate the smoothed (non-causal) solution")
+    _add_smooth_arg(evaluate)
     _add_levels_arg(evaluate)
 
     from app.experiments import add_experiment_parsers
@@ -310,10 +310,21 @@ def _add_recording_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--profile", choices=sorted(PROFILES), help="unit profile (default: the format's sensor)"
     )
-    parser.add_argument(
-        "--smooth", action="store_true", help="smoothed (non-causal) solution instead of the live one"
-    )
+    _add_smooth_arg(parser)
     _add_levels_arg(parser)
+
+
+def _add_smooth_arg(parser: argparse.ArgumentParser) -> None:
+    from app.export import SMOOTHING
+
+    parser.add_argument(
+        "--smooth",
+        nargs="?",
+        const=SMOOTHING[0],
+        choices=SMOOTHING,
+        help="smoothed solution instead of the causal filter's: of the whole recording (the default), "
+        "or step by step, as a live session shows each step once it has ended",
+    )
 
 
 def _add_levels_arg(parser: argparse.ArgumentParser) -> None:

@@ -342,3 +342,6 @@ def apply_capture_settings(cfg: Config, nav_json: dict[str, Any], source: str) -
     if isinstance(filter_table, dict) and "gravity_mps2" not in filter_table:
         # recorded before gravity was configured: its live estimates took |f| at rest for gravity
         cfg.set("filter.gravity_mps2", 0.0, f"{source} (recorded before gravity_mps2)")
+    if isinstance(filter_table, dict) and "step_smoothing" not in filter_table:
+        # recorded before step smoothing: its live filter held the stance levels as states
+        cfg.set("filter.step_smoothing", False, f"{source} (recorded before step smoothing)")

@@ -60,6 +60,7 @@ from pipeline.dual_navigator import DualNavigator
 from pipeline.navigator import Navigator
 from pipeline.profiles import get_profile
 from pipeline.runner import NavSink
+from pipeline.step_smoother import make_navigator
 from pipeline.tof_aiding import TofConfig
 from views.outputs import open_session_views
 
@@ -279,7 +280,7 @@ def run_demo(opts: DemoOptions) -> int:
             server.port,
             DualNavigator(dual_config, rate_hz=truth.rate_hz)
             if opts.dual_imu
-            else Navigator(nav_config, rate_hz=truth.rate_hz, tof=cfg.tof_config(opts.stance)),
+            else make_navigator(nav_config, truth.rate_hz, tof=cfg.tof_config(opts.stance)),
         )
         for foot, server in zip(feet, servers, strict=True)
     ]

@@ -49,8 +49,9 @@ class Evaluation:
         return 100.0 * self.loop_3d_m / self.distance_m
 
 
-def evaluate_file(path: Path, smooth: bool = False, stance_levels: bool = True) -> Evaluation:
-    """Navigate one recording and measure it (with the stance height levels unless told not to)."""
+def evaluate_file(path: Path, smooth: str | None = None, stance_levels: bool = True) -> Evaluation:
+    """Navigate one recording (smoothed when ``smooth`` is one of ``app.export.SMOOTHING``) and measure
+    it (with the stance height levels unless told not to)."""
     rec = load_recording(path)
     if rec.gt_pos_m is None and not rec.closed_loop:
         raise FootnavError(f"{path}: no ground truth and not a known closed loop; nothing to measure against")
@@ -146,7 +147,7 @@ def format_table(rows: list[Evaluation]) -> str:
 
 
 def run_evaluate(
-    paths: list[Path], smooth: bool = False, stance_levels: bool = True
+    paths: list[Path], smooth: str | None = None, stance_levels: bool = True
 ) -> tuple[list[Evaluation], list[str]]:
     """Evaluate every recording found; returns the rows and one-line problems (files that failed)."""
     files = find_recordings(paths)

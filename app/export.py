@@ -45,11 +45,16 @@ EXPORT_COLUMNS = (
 )
 
 
+SMOOTHING = ("whole", "step")
+"""``smooth`` choices: the RTS smoother of the whole recording (``pipeline.smoother``), or step by step
+as a live session shows the track once each step has ended (``pipeline.step_smoother``)."""
+
+
 def navigate_recording(
-    rec: Recording, profile: str | None = None, smooth: bool = False, stance_levels: bool = True
+    rec: Recording, profile: str | None = None, smooth: str | None = None, stance_levels: bool = True
 ) -> tuple[NavBatch, NavStats]:
-    """Run the navigator (and the smoother when asked) over a whole recording, with the stance height
-    levels unless ``stance_levels`` is False (``pipeline.stance_levels``).
+    """Run the navigator (and a smoother when asked: one of ``SMOOTHING``) over a whole recording,
+    with the stance height levels unless ``stance_levels`` is False (``pipeline.stance_levels``).
 
     The gyroscope's saturated stretches are reconstructed first (``pipeline.saturation``: this needs
     the whole recording, so it happens here and not in the live navigator).
@@ -59,12 +64,20 @@ def navigate_recording(
     """
     config = NavConfig(profile=get_profile(profile or rec.profile), stance_levels=stance_levels)
     sat = reconstruct_saturated_rates(rec.t_s, rec.gyr_b_radps)
-    if smooth:
+    if smooth == "whole":
         from pipeline.smoother import smooth_recording
 
         nav, stats = smooth_recording(
             rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, config, gyr_clipped_b=sat.clipped_b
         )
+    elif smooth == "step":
+        from pipeline.step_smoother import step_smooth_recording
+
+        nav, stats = step_smooth_recording(
+            rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, config, gyr_clipped_b=sat.clipped_b
+        )
+    elif smooth is not None:
+        raise ValueError(f"smooth must be one of {SMOOTHING} or None, got {smooth!r}")
     else:
         nav, stats = navigate(
             rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, config, gyr_clipped_b=sat.clipped_b
@@ -186,7 +199,7 @@ def run_export(
     fmt: str | None,
     columns: str | None,
     profile: str | None,
-    smooth: bool,
+    smooth: str | None,
     stance_levels: bool = True,
     steps_out: Path | None = None,
 ) -> str:
@@ -209,7 +222,7 @@ def run_export(
     rec = load_recording(source, fmt, CsvMapping.parse(columns) if columns else None)
     nav, stats = navigate_recording(rec, profile, smooth, stance_levels)
     write_track_csv(nav, out)
-    steps = "" if steps_out is None else f", {write_steps_csv(nav, steps_out, with_covariance=not smooth)}"
+    steps = "" if steps_out is None else f", {write_steps_csv(nav, steps_out, with_covariance=smooth is None)}"
     skipped = (
         f", {stats.samples_before_alignment} samples before the first still period not navigated"
         if stats.samples_before_alignment

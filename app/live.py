@@ -40,6 +40,7 @@ from pipeline.errors import DeviceError, FootnavError
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavConfig, Navigator
 from pipeline.runner import NavSink
+from pipeline.step_smoother import make_navigator
 from views.dual_imu import DualRunView
 from views.outputs import SessionViews, open_session_views
 
@@ -441,7 +442,7 @@ async def live_session(opts: LiveOptions) -> int:
         rate_hz = BASE_RATE_HZ / 2 ** dividers[foot]
         if dual is not None:
             return DualNavigator(dual_nav_config(nav_config, dual), rate_hz=rate_hz)
-        return Navigator(nav_config, rate_hz=rate_hz, tof=cfg.tof_config(opts.stance))
+        return make_navigator(nav_config, rate_hz, tof=cfg.tof_config(opts.stance))
 
     runs = [FootRun(foot, str(addresses[foot]), navigator(foot), rate_divider_log2=dividers[foot]) for foot in feet]
     for run in runs:

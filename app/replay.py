@@ -32,6 +32,7 @@ from pipeline.dual_navigator import DualNavigator
 from pipeline.errors import InputFormatError
 from pipeline.navigator import Navigator
 from pipeline.runner import NavSink
+from pipeline.step_smoother import make_navigator
 from views.outputs import open_session_views
 
 REPLAY_PUT_TIMEOUT_S = 60.0
@@ -166,7 +167,7 @@ def run_replay(opts: ReplayOptions) -> int:
             lever = lever_of[foot]
             navigator = DualNavigator(dual_nav_config(nav_config, (lever[0], lever[1], lever[2])), rate_hz=rate_hz)
         else:
-            navigator = Navigator(nav_config, rate_hz=rate_hz, tof=cfg.tof_config(opts.stance or str(recorded)))
+            navigator = make_navigator(nav_config, rate_hz, tof=cfg.tof_config(opts.stance or str(recorded)))
         run = FootRun(foot, opts.path.name, navigator)
         foot_sinks(run, views, status, two_feet=len(feet) > 1, put_timeout_s=0.0 if realtime else REPLAY_PUT_TIMEOUT_S)
         if views is not None and isinstance(navigator, DualNavigator):

@@ -1,4 +1,5 @@
-"""Accuracy table of every recording with ground truth, causal and RTS-smoothed, in one command.
+"""Accuracy table of every recording with ground truth, causal, step-smoothed (as live sessions show each
+step once it has ended) and RTS-smoothed, in one command.
 
     .venv/bin/python -m benchmarks.accuracy [--data ../shared/data] [--no-emulator] [--no-smooth] [--no-real]
         [--axis-errors none|gyro-bias-calibrated]
@@ -37,8 +38,9 @@ DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 EMULATED = (("rectangle", 240.0, 7), ("figure8", 240.0, 7), ("stairs", 60.0, 1))
 
 
-def real_rows(data: Path, smooth: bool) -> list[tuple[str, str, float, float, float, float]]:
-    """(name, format, ARMSE-2D, ATE-3D, loop 3D, loop 2D) per recording (NaN where not applicable)."""
+def real_rows(data: Path, smooth: str | None) -> list[tuple[str, str, float, float, float, float]]:
+    """(name, format, ARMSE-2D, ATE-3D, loop 3D, loop 2D) per recording (NaN where not applicable),
+    causal (``smooth`` None) or smoothed (``app.export.SMOOTHING``)."""
     rows = []
     for f in find_recordings([data]):
         e = evaluate_file(f, smooth)
@@ -76,18 +78,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--axis-errors", choices=sorted(AXIS_ERRORS), default="none", help="of the emulated IMU")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
-    modes = [] if args.no_real else [False] if args.no_smooth else [False, True]
+    modes: list[str | None] = [] if args.no_real else [None] if args.no_smooth else [None, "step", "whole"]
     results = {m: real_rows(args.data, m) for m in modes}
+    prefix = {None: "", "step": "st.", "whole": "s."}
     if modes:
         print(
             f"{'recording':<22} {'format':<8} "
-            + " ".join(
-                f"{h:>7}"
-                for m in modes
-                for h in (("s." if m else "") + x for x in ("ARMSE", "ATE3D", "loop3D", "loop2D"))
-            )
+            + " ".join(f"{prefix[m] + h:>7}" for m in modes for h in ("ARMSE", "ATE3D", "loop3D", "loop2D"))
         )
-    for i, row in enumerate(results.get(False, [])):
+    for i, row in enumerate(results.get(None, [])):
         cells = []
         for m in modes:
             cells += [_f(v) for v in results[m][i][2:]]
@@ -95,10 +94,11 @@ def main(argv: list[str] | None = None) -> int:
     for m in modes:
         a = np.array([r[2] for r in results[m] if r[1] == "pyshoe"])
         loops = {r[0]: (r[4], r[5]) for r in results[m] if not math.isnan(r[4])}
-        label = "smoothed" if m else "causal  "
+        label = {None: "causal", "step": "step-smoothed", "whole": "smoothed"}[m]
         loop_txt = "  ".join(f"{k} 3D {v[0]:.3f} 2D {v[1]:.3f}" for k, v in loops.items())
         print(
-            f"{label}: PyShoe ARMSE-2D mean {a.mean():.3f} median {np.median(a):.3f} max {a.max():.3f} m;  {loop_txt}"
+            f"{label:<13}: PyShoe ARMSE-2D mean {a.mean():.4f} median {np.median(a):.3f} max {a.max():.3f} m;  "
+            f"{loop_txt}"
         )
     if not args.no_emulator:
         for path, dur, seed in EMULATED:

@@ -43,6 +43,7 @@ from pipeline.navigator import (
     zupt_ratio,
 )
 from pipeline.samples import ImuBatch
+from pipeline.step_smoother import StepSmoothingNavigator
 
 RATE_HZ = 1000.0
 ROOT = Path(__file__).resolve().parents[1]
@@ -187,8 +188,8 @@ def main(argv: list[str] | None = None) -> int:
         )  # fmt: skip
         return pos, vel, quat, cov
 
-    def streamed() -> None:
-        nav = Navigator(cfg, RATE_HZ)
+    def streamed(navigator: type[Navigator] = Navigator) -> None:
+        nav = navigator(cfg, RATE_HZ)
         counter, host = np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
         for a in range(0, n, args.batch):
             b = a + args.batch
@@ -205,6 +206,12 @@ def main(argv: list[str] | None = None) -> int:
         _time("filter (15-state ESKF, ZUPT + ZARU)", n, lambda: filter_run(n), r),
         _time("detector + filter (navigate, one batch)", n, lambda: navigate(t, acc, gyr, RATE_HZ, cfg), r),
         _time(f"detector + filter (Navigator, {args.batch}-sample batches)", n, streamed, r),
+        _time(
+            f"+ step smoothing (live sessions, {args.batch}-sample batches)",
+            n,
+            lambda: streamed(StepSmoothingNavigator),
+            r,
+        ),
     ]
     m = min(n, round(args.baseline_s * RATE_HZ))
     base = _time(

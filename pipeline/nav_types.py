@@ -78,8 +78,9 @@ class SmoothedSpan:
             after alignment).
         t_s: (m,) their device time, s.
         pos_n_m, vel_n_mps, quat_nb_wxyz: (m, 3), (m, 3), (m, 4), as in :class:`NavBatch`.
-        cov_pos_yaw: (m, 4, 4) covariance of (x, y, z, ψ).
         clearance_m: (m,) height of the IMU above the same floor as the causal estimate's, m.
+        cov_pos_yaw: (m, 4, 4) covariance of (x, y, z, ψ), when it was asked for (it costs most of
+            the smoothing: live sessions show the smoothed track alone).
     """
 
     first_sample: int
@@ -87,8 +88,8 @@ class SmoothedSpan:
     pos_n_m: F64
     vel_n_mps: F64
     quat_nb_wxyz: F64
-    cov_pos_yaw: F64
     clearance_m: F64
+    cov_pos_yaw: F64 | None = None
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -109,6 +110,10 @@ class SmoothedSpan:
             pos_n_m=np.concatenate([s.pos_n_m for s in spans]),
             vel_n_mps=np.concatenate([s.vel_n_mps for s in spans]),
             quat_nb_wxyz=np.concatenate([s.quat_nb_wxyz for s in spans]),
-            cov_pos_yaw=np.concatenate([s.cov_pos_yaw for s in spans]),
             clearance_m=np.concatenate([s.clearance_m for s in spans]),
+            cov_pos_yaw=(
+                np.concatenate([s.cov_pos_yaw for s in spans if s.cov_pos_yaw is not None])
+                if all(s.cov_pos_yaw is not None for s in spans)
+                else None
+            ),
         )

@@ -76,6 +76,9 @@ class NavConfig:
             the still start for gravity instead (0 or less here, as before 2026-12) hides the bias
             along gravity in g, where the filter's bias states cannot see it, and turns it into an
             unmodelled error as soon as the foot tilts (README "Accuracy", the consistency paragraph).
+        step_smoothing: a live session also shows each step smoothed once it has ended
+            (``pipeline.step_smoother``; its causal filter holds the stance levels as constants). The
+            :class:`Navigator` itself is causal only: :func:`make_navigator` picks the class.
     """
 
     profile: UnitProfile = field(default_factory=lambda: get_profile("mpu6500x4"))
@@ -91,6 +94,7 @@ class NavConfig:
     max_wait_s: float = 30.0
     stance_levels: bool = True
     gravity_mps2: float = G0_MPS2
+    step_smoothing: bool = True
 
 
 @dataclass

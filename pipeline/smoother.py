@@ -199,6 +199,70 @@ def _storing_segment(
         )  # fmt: skip
 
 
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _error_vs_predicted(xs: F64, xp: F64, k1: int, dp: F64) -> None:  # pragma: no cover
+    """dp (15,) = the smoothed nominal ``xs`` (16,) ⊖ the predicted nominal ``xp[k1]``."""
+    for r in range(3):
+        dp[P0 + r] = xs[r] - xp[k1, r]
+        dp[V0 + r] = xs[3 + r] - xp[k1, 3 + r]
+        dp[BA0 + r] = xs[10 + r] - xp[k1, 10 + r]
+        dp[BG0 + r] = xs[13 + r] - xp[k1, 13 + r]
+    dp[TH0], dp[TH0 + 1], dp[TH0 + 2] = _rot_diff_s(xs, xp[k1])
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _f_times_p(Pf: F64, k: int, fn: F64, Rm: F64, dt: float, k1: int, B: F64) -> None:  # pragma: no cover
+    """B = F_{k+1} P_k (rows of p, v, θ change; ``eskf._propagate_cov``'s row operations)."""
+    s = -dt
+    f0, f1, f2 = fn[k1, 0], fn[k1, 1], fn[k1, 2]
+    for j in range(N_STATE):
+        a0, a1, a2 = Pf[k, TH0, j], Pf[k, TH0 + 1, j], Pf[k, TH0 + 2, j]
+        b0, b1, b2 = Pf[k, BA0, j], Pf[k, BA0 + 1, j], Pf[k, BA0 + 2, j]
+        g0, g1, g2 = Pf[k, BG0, j], Pf[k, BG0 + 1, j], Pf[k, BG0 + 2, j]
+        for r in range(3):
+            B[P0 + r, j] = Pf[k, P0 + r, j] + dt * Pf[k, V0 + r, j]
+            B[TH0 + r, j] = Pf[k, TH0 + r, j] + s * (Rm[k1, r, 0] * g0 + Rm[k1, r, 1] * g1 + Rm[k1, r, 2] * g2)
+            B[BA0 + r, j] = b0 if r == 0 else (b1 if r == 1 else b2)
+            B[BG0 + r, j] = g0 if r == 0 else (g1 if r == 1 else g2)
+        B[V0, j] = Pf[k, V0, j] + s * (-f2 * a1 + f1 * a2)
+        B[V0 + 1, j] = Pf[k, V0 + 1, j] + s * (f2 * a0 - f0 * a2)
+        B[V0 + 2, j] = Pf[k, V0 + 2, j] + s * (-f1 * a0 + f0 * a1)
+        for r in range(3):
+            B[V0 + r, j] += s * (Rm[k1, r, 0] * b0 + Rm[k1, r, 1] * b1 + Rm[k1, r, 2] * b2)
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _scaled_cholesky(Pp: F64, k1: int, d: F64, L: F64) -> None:  # pragma: no cover
+    """d = diag(P⁻)^-½ and the Cholesky factor of the unit-diagonal scaling: D P⁻_{k+1} D = L Lᵀ."""
+    for i in range(N_STATE):
+        d[i] = 1.0 / math.sqrt(max(Pp[k1, i, i], 1e-300))
+    for j in range(N_STATE):
+        acc = Pp[k1, j, j] * d[j] * d[j]
+        for m in range(j):
+            acc -= L[j, m] * L[j, m]
+        ljj = math.sqrt(max(acc, 1e-300))
+        L[j, j] = ljj
+        for i in range(j + 1, N_STATE):
+            acc = Pp[k1, i, j] * d[i] * d[j]
+            for m in range(j):
+                acc -= L[i, m] * L[j, m]
+            L[i, j] = acc / ljj
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _inject_smoothed(xf: F64, k: int, ds: F64, xs: F64) -> None:  # pragma: no cover
+    """xs (16,) = x̂_k ⊕ δ^s_k."""
+    for r in range(3):
+        xs[r] = xf[k, r] + ds[P0 + r]
+        xs[3 + r] = xf[k, 3 + r] + ds[V0 + r]
+        xs[10 + r] = xf[k, 10 + r] + ds[BA0 + r]
+        xs[13 + r] = xf[k, 13 + r] + ds[BG0 + r]
+    ew, ex, ey, ez = quat_from_rotvec_s(ds[TH0], ds[TH0 + 1], ds[TH0 + 2])
+    qw, qx, qy, qz = quat_mul_s(ew, ex, ey, ez, xf[k, 6], xf[k, 7], xf[k, 8], xf[k, 9])
+    norm = math.sqrt(qw**2 + qx**2 + qy**2 + qz**2)
+    xs[6], xs[7], xs[8], xs[9] = qw / norm, qx / norm, qy / norm, qz / norm
+
+
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
 def _backward_pass(
     xf: F64,
@@ -237,12 +301,7 @@ def _backward_pass(
         if k < last:
             k1 = k + 1
             # smoothed error at k+1 against the predicted nominal x̂⁻_{k+1}
-            for r in range(3):
-                dp[P0 + r] = xs[r] - xp[k1, r]
-                dp[V0 + r] = xs[3 + r] - xp[k1, 3 + r]
-                dp[BA0 + r] = xs[10 + r] - xp[k1, 10 + r]
-                dp[BG0 + r] = xs[13 + r] - xp[k1, 13 + r]
-            dp[TH0], dp[TH0 + 1], dp[TH0 + 2] = _rot_diff_s(xs, xp[k1])
+            _error_vs_predicted(xs, xp, k1, dp)
             # P̃ = J Ps Jᵀ, J = I − [ĉ/2]× on θ (inverse of the filter's reset at k+1)
             c0, c1, c2 = _rot_diff_s(xf[k1], xp[k1])
             rotate_attitude_block(Ps, -0.5 * c0, -0.5 * c1, -0.5 * c2)
@@ -251,40 +310,8 @@ def _backward_pass(
                 for i in range(N_STATE):
                     ds[i] = dp[i]
             else:
-                dt = dt_s[k1]
-                s = -dt
-                f0, f1, f2 = fn[k1, 0], fn[k1, 1], fn[k1, 2]
-                # B = F P_k (rows of p, v, θ change; eskf._propagate_cov's row operations)
-                for j in range(N_STATE):
-                    a0, a1, a2 = Pf[k, TH0, j], Pf[k, TH0 + 1, j], Pf[k, TH0 + 2, j]
-                    b0, b1, b2 = Pf[k, BA0, j], Pf[k, BA0 + 1, j], Pf[k, BA0 + 2, j]
-                    g0, g1, g2 = Pf[k, BG0, j], Pf[k, BG0 + 1, j], Pf[k, BG0 + 2, j]
-                    for r in range(3):
-                        B[P0 + r, j] = Pf[k, P0 + r, j] + dt * Pf[k, V0 + r, j]
-                        B[TH0 + r, j] = Pf[k, TH0 + r, j] + s * (
-                            Rm[k1, r, 0] * g0 + Rm[k1, r, 1] * g1 + Rm[k1, r, 2] * g2
-                        )
-                        B[BA0 + r, j] = b0 if r == 0 else (b1 if r == 1 else b2)
-                        B[BG0 + r, j] = g0 if r == 0 else (g1 if r == 1 else g2)
-                    B[V0, j] = Pf[k, V0, j] + s * (-f2 * a1 + f1 * a2)
-                    B[V0 + 1, j] = Pf[k, V0 + 1, j] + s * (f2 * a0 - f0 * a2)
-                    B[V0 + 2, j] = Pf[k, V0 + 2, j] + s * (-f1 * a0 + f0 * a1)
-                    for r in range(3):
-                        B[V0 + r, j] += s * (Rm[k1, r, 0] * b0 + Rm[k1, r, 1] * b1 + Rm[k1, r, 2] * b2)
-                # Cholesky of the unit-diagonal scaling of P⁻_{k+1}: D P⁻ D = L Lᵀ
-                for i in range(N_STATE):
-                    d[i] = 1.0 / math.sqrt(max(Pp[k1, i, i], 1e-300))
-                for j in range(N_STATE):
-                    acc = Pp[k1, j, j] * d[j] * d[j]
-                    for m in range(j):
-                        acc -= L[j, m] * L[j, m]
-                    ljj = math.sqrt(max(acc, 1e-300))
-                    L[j, j] = ljj
-                    for i in range(j + 1, N_STATE):
-                        acc = Pp[k1, i, j] * d[i] * d[j]
-                        for m in range(j):
-                            acc -= L[i, m] * L[j, m]
-                        L[i, j] = acc / ljj
+                _f_times_p(Pf, k, fn, Rm, dt_s[k1], k1, B)
+                _scaled_cholesky(Pp, k1, d, L)
                 # Cᵀ = P⁻⁻¹ B = D (L Lᵀ)⁻¹ D B, all columns at once (the innermost loops run along rows,
                 # independent and contiguous, so they vectorise without reassociating any sum)
                 for i in range(N_STATE):
@@ -335,16 +362,7 @@ def _backward_pass(
                 for i in range(N_STATE):
                     for c in range(i):
                         Ps[i, c] = Ps[c, i]
-            # x^s_k = x̂_k ⊕ δ^s_k
-            for r in range(3):
-                xs[r] = xf[k, r] + ds[P0 + r]
-                xs[3 + r] = xf[k, 3 + r] + ds[V0 + r]
-                xs[10 + r] = xf[k, 10 + r] + ds[BA0 + r]
-                xs[13 + r] = xf[k, 13 + r] + ds[BG0 + r]
-            ew, ex, ey, ez = quat_from_rotvec_s(ds[TH0], ds[TH0 + 1], ds[TH0 + 2])
-            qw, qx, qy, qz = quat_mul_s(ew, ex, ey, ez, xf[k, 6], xf[k, 7], xf[k, 8], xf[k, 9])
-            norm = math.sqrt(qw**2 + qx**2 + qy**2 + qz**2)
-            xs[6], xs[7], xs[8], xs[9] = qw / norm, qx / norm, qy / norm, qz / norm
+            _inject_smoothed(xf, k, ds, xs)
         for r in range(3):
             out_pos[k, r] = xs[r]
             out_vel[k, r] = xs[3 + r]
@@ -352,6 +370,60 @@ def _backward_pass(
             out_quat[k, r] = xs[6 + r]
             for c in range(4):
                 out_cov[k, r, c] = Ps[pos_yaw[r], pos_yaw[c]]
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"})
+def _backward_mean_pass(
+    xf: F64, xp: F64, Pf: F64, Pp: F64, fn: F64, Rm: F64, dt_s: F64, last: int,
+    out_pos: F64, out_vel: F64, out_quat: F64,
+) -> None:  # fmt: skip
+    """The smoothed states alone of :func:`_backward_pass`, from the filtered one at ``last`` (the
+    terminal condition of a window: ``pipeline.step_smoother``) down to sample 0, writing all of them.
+
+    δ^s_k = C δ⁻ = P_k Fᵀ (P⁻)⁻¹ δ⁻ needs one vector solve with P⁻ instead of the 15 of C and no
+    covariance recursion: about 1 400 multiply-adds per sample instead of 9 000.
+    """  # pragma: no cover
+    dp = np.empty(N_STATE)
+    ds = np.empty(N_STATE)
+    xs = xf[last].copy()
+    B = np.empty((N_STATE, N_STATE))
+    L = np.empty((N_STATE, N_STATE))
+    d = np.empty(N_STATE)
+    y = np.empty(N_STATE)
+    for k in range(last, -1, -1):
+        if k < last:
+            k1 = k + 1
+            _error_vs_predicted(xs, xp, k1, dp)
+            if math.isnan(fn[k1, 0]):
+                for i in range(N_STATE):
+                    ds[i] = dp[i]
+            else:
+                _f_times_p(Pf, k, fn, Rm, dt_s[k1], k1, B)
+                _scaled_cholesky(Pp, k1, d, L)
+                # y = (P⁻)⁻¹ δ⁻ = D (L Lᵀ)⁻¹ D δ⁻, then δ^s = Bᵀ y
+                for i in range(N_STATE):
+                    acc = d[i] * dp[i]
+                    for m in range(i):
+                        acc -= L[i, m] * y[m]
+                    y[i] = acc / L[i, i]
+                for i in range(N_STATE - 1, -1, -1):
+                    acc = y[i]
+                    for m in range(i + 1, N_STATE):
+                        acc -= L[m, i] * y[m]
+                    y[i] = acc / L[i, i]
+                for i in range(N_STATE):
+                    y[i] *= d[i]
+                for i in range(N_STATE):
+                    acc = 0.0
+                    for m in range(N_STATE):
+                        acc += B[m, i] * y[m]
+                    ds[i] = acc
+            _inject_smoothed(xf, k, ds, xs)
+        for r in range(3):
+            out_pos[k, r] = xs[r]
+            out_vel[k, r] = xs[3 + r]
+        for r in range(4):
+            out_quat[k, r] = xs[6 + r]
 
 
 def store_span(

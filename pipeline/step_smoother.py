@@ -42,9 +42,9 @@ from pipeline import eskf
 from pipeline.nav_types import NavBatch, SmoothedSpan
 from pipeline.navigator import NavConfig, Navigator, NavStats, clip_variance, zupt_ratio
 from pipeline.samples import ImuBatch
-from pipeline.smoother import _backward_pass, store_span
+from pipeline.smoother import _backward_mean_pass, _backward_pass, store_span
 from pipeline.stance_levels import StanceLevelParams, StanceLevels, height_update
-from pipeline.tof_aiding import RangeBatch
+from pipeline.tof_aiding import RangeBatch, TofConfig
 
 F64 = NDArray[np.float64]
 
@@ -62,20 +62,30 @@ class StepSmoothingNavigator(Navigator):
     """The causal :class:`Navigator`, whose batches also carry the step-smoothed estimates of the
     samples whose step has ended (``NavBatch.smoothed``; module docstring).
 
+    ToF readings add floor states to the filter, which the smoothing passes do not store: the first
+    one (:meth:`add_ranges`) ends the smoothing, and the navigator goes on as a causal one.
+
     Args:
-        config, rate_hz: as for :class:`Navigator` (no ToF readings: :meth:`add_ranges` refuses them).
+        config, rate_hz, tof: as for :class:`Navigator`.
         close_after_s: stance time after which a window closes, s.
         max_window_s: longest window, s.
+        with_covariance: also smooth the covariance (``SmoothedSpan.cov_pos_yaw``); it costs most of
+            the work (``smoother._backward_mean_pass``), so live sessions go without.
     """
 
     def __init__(
         self,
         config: NavConfig,
         rate_hz: float,
+        tof: TofConfig | None = None,
         close_after_s: float = STEP_CLOSE_AFTER_S,
         max_window_s: float = MAX_WINDOW_S,
+        with_covariance: bool = False,
     ) -> None:
-        super().__init__(config, rate_hz)
+        super().__init__(config, rate_hz, tof=tof)
+        self.with_covariance = with_covariance
+        self.smoothing = True
+        """False once ToF readings have arrived (class docstring)."""
         self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels, level_states=0), rate_hz)
         self.level_updates = []
         self.close_after = max(1, round(close_after_s * rate_hz))
@@ -87,9 +97,13 @@ class StepSmoothingNavigator(Navigator):
         self._work = np.empty((2, eskf.N_STATE))
         self.closes: list[int] = []
         """Index of each window's last sample, in order (0: the first sample after alignment)."""
+        _load_kernels(with_covariance)
 
     def add_ranges(self, readings: RangeBatch) -> None:
-        raise ValueError("step smoothing does not take ToF readings (their floor states): use Navigator")
+        if len(readings) and self.smoothing:
+            self.smoothing = False
+            self._pieces, self._checkpoint = [], None
+        super().add_ranges(readings)
 
     def finish(self) -> SmoothedSpan | None:
         """Close the open window at the last sample navigated (the end of a session or recording):
@@ -101,6 +115,8 @@ class StepSmoothingNavigator(Navigator):
 
     def _run(self, batch: ImuBatch, stat: F64, threshold: F64, still: NDArray[np.bool_]) -> NavBatch:
         assert self._x is not None
+        if not self.smoothing:
+            return super()._run(batch, stat, threshold, still)
         if self._checkpoint is None:
             self._checkpoint = (self._x.copy(), self._P.copy(), 0)
         dt = eskf.sample_intervals(batch.t_s, self._t_last, self.config.dt_max_s)  # as Navigator._run
@@ -124,17 +140,28 @@ class StepSmoothingNavigator(Navigator):
 
     def _closes(self, first: int, still: NDArray[np.bool_]) -> list[int]:
         """Indices of the samples after which windows close in a batch starting at sample ``first``."""
-        n = still.shape[0]
-        k = np.arange(n)
-        last_swing = np.maximum.accumulate(np.where(still, -1, k))
-        run = np.where(still, k - last_swing + np.where(last_swing < 0, self._stance_run, 0), 0)
-        previous = np.concatenate([[self._stance_run], run[:-1]])
-        self._stance_run = int(run[-1])
-        at = np.flatnonzero(run == self.close_after)  # the stance has lasted close_after samples
-        ended = np.flatnonzero(~still & (previous > 0) & (previous < self.close_after)) - 1  # a short one ended
+        n, run0, close_after = still.shape[0], self._stance_run, self.close_after
+        candidates: list[int] = []
+        if still.all():  # most live batches are all stance or all swing: no arrays needed
+            self._stance_run = run0 + n
+            if run0 < close_after <= run0 + n:
+                candidates = [first + close_after - run0 - 1]
+        elif not still.any():
+            self._stance_run = 0
+            if 0 < run0 < close_after:  # a short stance ended with the previous batch
+                candidates = [first - 1]
+        else:
+            k = np.arange(n)
+            last_swing = np.maximum.accumulate(np.where(still, -1, k))
+            run = np.where(still, k - last_swing + np.where(last_swing < 0, run0, 0), 0)
+            previous = np.concatenate([[run0], run[:-1]])
+            self._stance_run = int(run[-1])
+            at = np.flatnonzero(run == close_after)  # the stance has lasted close_after samples
+            ended = np.flatnonzero(~still & (previous > 0) & (previous < close_after)) - 1  # a short one ended
+            candidates = sorted(int(c) + first for c in np.concatenate([at, ended]))
         closes: list[int] = []
         start = self._window_start
-        for b in sorted({int(c) + first for c in np.concatenate([at, ended])}):
+        for b in candidates:
             while b - start + 1 > self.max_window:
                 start += self.max_window
                 closes.append(start - 1)
@@ -163,24 +190,59 @@ class StepSmoothingNavigator(Navigator):
             if k < a:  # due after the previous window's last sample, found after its close
                 height_update(x, P, -1, z, level_r, self._work)
         local = [(k - a, z) for k, z in updates[applied:] if a <= k <= b]
-        buffers = (
-            np.empty((m, 16)),
-            np.empty((m, eskf.N_STATE, eskf.N_STATE)),
-            np.empty((m, 16)),
-            np.empty((m, eskf.N_STATE, eskf.N_STATE)),
-            np.empty((m, 3)),
-            np.empty((m, 3, 3)),
-        )
+        buffers = _buffers(m)
         inputs = (acc, gyr, gyr_var, dt, still, ratio)
         store_span(x, P, 0, m, inputs, self._par, local, [k for k, _ in local], level_r, buffers, self._work)
         self._checkpoint = (x, P, sum(1 for k, _ in updates if k <= b))
         self._window_start = b + 1
         self.closes.append(b)
         xf, Pf, xp, Pp, fn, Rm = buffers
-        pos, vel, quat, cov = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 4)), np.empty((m, 4, 4))
-        ds, Ps, xs = np.zeros(eskf.N_STATE), Pf[m - 1].copy(), xf[m - 1].copy()
-        _backward_pass(xf, Pf, xp, Pp, fn, Rm, dt, m - 1, True, ds, Ps, xs, pos, vel, quat, cov)
-        return SmoothedSpan(a, t, pos, vel, quat, cov, pos[:, 2] - floor)
+        pos, vel, quat = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 4))
+        cov = None
+        if self.with_covariance:
+            cov = np.empty((m, 4, 4))
+            ds, Ps, xs = np.zeros(eskf.N_STATE), Pf[m - 1].copy(), xf[m - 1].copy()
+            _backward_pass(xf, Pf, xp, Pp, fn, Rm, dt, m - 1, True, ds, Ps, xs, pos, vel, quat, cov)
+        else:
+            _backward_mean_pass(xf, xp, Pf, Pp, fn, Rm, dt, m - 1, pos, vel, quat)
+        return SmoothedSpan(a, t, pos, vel, quat, pos[:, 2] - floor, cov)
+
+
+def _buffers(m: int) -> tuple[F64, F64, F64, F64, F64, F64]:
+    """What ``smoother.store_span`` keeps for m samples: xf, Pf, xp, Pp, fn, Rm."""
+    n = eskf.N_STATE
+    states, covariances = (np.empty((m, 16)), np.empty((m, 16))), (np.empty((m, n, n)), np.empty((m, n, n)))
+    return states[0], covariances[0], states[1], covariances[1], np.empty((m, 3)), np.empty((m, 3, 3))
+
+
+_LOADED: set[bool] = set()
+
+
+def _load_kernels(with_covariance: bool) -> None:
+    """Compile (or load from numba's cache) the smoothing kernels now, on three still samples, so
+    that a live session's first step does not stall the stream while they compile (several seconds
+    on a fresh install)."""
+    if with_covariance in _LOADED:
+        return
+    m, g = 3, 9.80665
+    acc, gyr = np.tile([0.0, 0.0, g], (m, 1)), np.zeros((m, 3))
+    x, P = np.zeros(16), np.eye(eskf.N_STATE) * 1e-4
+    x[6] = 1.0
+    par = np.zeros(eskf.N_PAR)
+    par[[eskf.PAR_SIG_ACC, eskf.PAR_SIG_GYR, eskf.PAR_ZUPT, eskf.PAR_ZARU, eskf.PAR_ZARU_GATE_SIG]] = 0.01
+    par[[eskf.PAR_G, eskf.PAR_DT_MAX, eskf.PAR_ZARU_GATE, eskf.PAR_ZUPT_GATE]] = (g, 1.0, 7.8, 100.0)
+    buffers = _buffers(m)
+    dt, still, ratio = np.full(m, 0.001), np.ones(m, dtype=np.bool_), np.zeros(m)
+    inputs = (acc, gyr, np.zeros((m, 3)), dt, still, ratio)
+    store_span(x, P, 0, m, inputs, par, [], [], 1e-4, buffers, np.empty((2, eskf.N_STATE)))
+    xf, Pf, xp, Pp, fn, Rm = buffers
+    out = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 4))
+    if with_covariance:
+        ds, Ps, xs, cov = np.zeros(eskf.N_STATE), Pf[-1].copy(), xf[-1].copy(), np.empty((m, 4, 4))
+        _backward_pass(xf, Pf, xp, Pp, fn, Rm, dt, m - 1, True, ds, Ps, xs, *out, cov)
+    else:
+        _backward_mean_pass(xf, xp, Pf, Pp, fn, Rm, dt, m - 1, *out)
+    _LOADED.add(with_covariance)
 
 
 def _split(
@@ -202,6 +264,13 @@ def _split(
     return window, rest
 
 
+def make_navigator(config: NavConfig, rate_hz: float, tof: TofConfig | None = None) -> Navigator:
+    """A live session's navigator: step-smoothing when ``config.step_smoothing``, else causal only."""
+    if config.step_smoothing:
+        return StepSmoothingNavigator(config, rate_hz, tof=tof)
+    return Navigator(config, rate_hz, tof=tof)
+
+
 def step_smooth_recording(
     t_s: F64,
     acc_b_mps2: F64,
@@ -215,7 +284,7 @@ def step_smooth_recording(
     ended (the last window closed at the end). Same samples, stance flags and statistics as
     ``navigator.navigate`` on the same arrays; positions, velocities, attitude, ``cov_pos_yaw``,
     ``pos_cov_n_m2`` and ``clearance_m`` are the step-smoothed ones."""
-    nav = StepSmoothingNavigator(config or NavConfig(), rate_hz)
+    nav = StepSmoothingNavigator(config or NavConfig(), rate_hz, with_covariance=True)
     n = t_s.shape[0]
     out = nav.process(
         ImuBatch(t_s, acc_b_mps2, gyr_b_radps, np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64), gyr_clipped_b)
@@ -227,6 +296,7 @@ def step_smooth_recording(
     span = SmoothedSpan.concat(spans)
     assert span is not None and span.first_sample == 0 and len(span) == len(out)
     cov = span.cov_pos_yaw
+    assert cov is not None
     return (
         dataclasses.replace(
             out,

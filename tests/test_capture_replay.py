@@ -98,7 +98,7 @@ def test_two_feet_capture_replays_both(tmp_path: Path) -> None:
     assert 1.0 <= part.t_s[0] < 1.002 and 7.998 < part.t_s[-1] <= 8.0
     # exported with --steps: a track and a steps file per foot, named by the foot
     summary = run_export(
-        path, tmp_path / "t.csv", fmt=None, columns=None, profile=None, smooth=False, steps_out=tmp_path / "s.csv"
+        path, tmp_path / "t.csv", fmt=None, columns=None, profile=None, smooth=None, steps_out=tmp_path / "s.csv"
     )
     for foot in ("left", "right"):
         assert (tmp_path / f"t-{foot}.csv").exists()

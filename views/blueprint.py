@@ -6,8 +6,9 @@ Layout, sized for a laptop screen (1366×768 and up)::
     │                              │ Foot clearance [m]           │
     │  3D: per foot the track      │ [Speed | Heading | Stance]   │
     │  (trail up to the cursor +   │ [Detector | Position σ]      │
-    │  decimated line), pose, step │ [Link rate | Link errors |   │
-    │  markers with floor ellipses,│  Gait | Events]              │
+    │  decimated line; the step-   │ [Link rate | Link errors |   │
+    │  smoothed track), pose, step │  Gait | Events]              │
+    │  markers with floor ellipses,│                              │
     │  k-sigma ellipsoid, truth    │                              │
     └──────────────────────────────┴──────────────────────────────┘
 
@@ -53,6 +54,8 @@ FLOOR_HIT_RADIUS_M = 0.003
 SWING_RGB = (255, 140, 0)
 STANCE_RGB = (0, 160, 255)
 TRUTH_RGB = (150, 150, 150)
+SMOOTHED_RGB = (150, 70, 210)
+"""The step-smoothed track and clearance (``pipeline.step_smoother``)."""
 TOF_RGB = ((0, 170, 120), (150, 90, 200), (200, 150, 0))
 """Colours of the three ToF sensors' measured heights (toe, mid-foot, heel)."""
 COV_RGBA = (255, 200, 0, 110)
@@ -106,6 +109,7 @@ def build_blueprint(
     for p in paths:
         overrides[p.track] = [_trail(), rr.Points3D.from_fields(radii=TRACK_RADIUS_M, show_labels=False)]
         overrides[p.truth] = [_trail(), rr.Points3D.from_fields(radii=TRUTH_RADIUS_M, show_labels=False)]
+        overrides[p.smoothed] = [_trail(), rr.Points3D.from_fields(radii=TRACK_RADIUS_M, show_labels=False)]
         overrides[p.steps] = [_trail(), rr.Points3D.from_fields(radii=STEP_RADIUS_M, show_labels=False)]
         overrides[p.step_cov] = [_trail()]
         overrides[p.floor_hits] = [_trail(), rr.Points3D.from_fields(radii=FLOOR_HIT_RADIUS_M, show_labels=False)]
@@ -185,6 +189,7 @@ def static_setup(feet: Sequence[str] = ("foot",)) -> list[tuple[str, rr.AsCompon
                 rr.Ellipsoids3D.from_fields(colors=[COV_RGBA], fill_mode="majorwireframe", line_radii=0.002),
             ),
             (p.truth, rr.Points3D.from_fields(colors=[TRUTH_RGB])),
+            (p.smoothed, rr.Points3D.from_fields(colors=[SMOOTHED_RGB])),
             (p.line, rr.LineStrips3D.from_fields(colors=[rgb], radii=LINE_RADIUS_M)),
             (p.steps, rr.Points3D.from_fields(colors=[rgb])),
             (p.step_cov, rr.Ellipsoids3D.from_fields(colors=[(*rgb, 70)], fill_mode="solid")),
@@ -200,6 +205,10 @@ def static_setup(feet: Sequence[str] = ("foot",)) -> list[tuple[str, rr.AsCompon
                 ),
             ),
             (p.clearance, rr.SeriesLines(names=f"{foot} clearance", colors=[rgb], widths=1.5)),
+            (
+                p.smoothed_clearance,
+                rr.SeriesLines(names=f"{foot} clearance (step-smoothed)", colors=[SMOOTHED_RGB], widths=1.5),
+            ),
             (
                 p.swing_clearance,
                 rr.SeriesLines(names=f"{foot} clearance (whole swing)", colors=[(*_darker(rgb),)], widths=1.0),

@@ -17,7 +17,7 @@ import numpy as np
 import rerun as rr
 from numpy.typing import NDArray
 
-from pipeline.nav_types import NavBatch
+from pipeline.nav_types import NavBatch, SmoothedSpan
 from pipeline.tof_update import USED as TOF_USED
 from views.paths import TIMELINE, FootPaths
 
@@ -131,6 +131,7 @@ def concat_batches(batches: Sequence[NavBatch]) -> NavBatch:
             if all(b.cov_pos_yaw is not None for b in batches)
             else None
         ),
+        smoothed=SmoothedSpan.concat([b.smoothed for b in batches if b.smoothed is not None]),
     )
 
 
@@ -376,6 +377,18 @@ def tof_columns(nav: NavBatch, paths: FootPaths, totals: NDArray[np.int64]) -> l
     if alt is not None and len(alt):
         out.append((paths.altitude, time_column(alt.t_s), rr.Scalars.columns(scalars=alt.altitude_m)))
     return out
+
+
+def smoothed_columns(span: SmoothedSpan, paths: FootPaths) -> list[SendColumns]:
+    """The step-smoothed track and its clearance (``pipeline.step_smoother``), at the samples' own
+    times (empty for an empty span)."""
+    if not len(span):
+        return []
+    pos = np.asarray(span.pos_n_m, dtype=np.float32)
+    return [
+        (paths.smoothed, time_column(span.t_s), rr.Points3D.columns(positions=pos)),
+        *series_columns(paths.smoothed_clearance, span.t_s, span.clearance_m),
+    ]
 
 
 def series_columns(path: str, t_s: F64, values: F64) -> list[SendColumns]:

@@ -442,6 +442,8 @@ class RerunLogger:
             arrays, nav.pos_cov_n_m2, onsets, paths, sigma_scale=self._sigma_scale
         )
         columns_list += convert.tof_columns(nav, paths, self._tof_totals.setdefault(foot, np.zeros(3, np.int64)))
+        if nav.smoothed is not None:
+            columns_list += convert.smoothed_columns(nav.smoothed, paths)
         tracker = self._swing.get(foot)
         if tracker is None and nav.floor_z_m is not None:  # a ToF unit: its floor is tracked from now on
             tracker = self._swing[foot] = SwingClearanceTracker(TofConfig().snap_m)

@@ -9,6 +9,8 @@ so two feet become siblings under ``world/`` and in each plot:
 - ``world/<foot>/cov``    Ellipsoids3D, k-sigma position covariance in the navigation frame
   (sibling of ``pose``, positioned with ``centers``: it must not inherit the foot rotation);
 - ``world/<foot>/line``   LineStrips3D, the decimated track, re-logged at most twice a second;
+- ``world/<foot>/smoothed``  Points3D, the track smoothed step by step, logged once each step has
+  ended, shown as a trail (its clearance: ``plots/clearance/<foot>/smoothed``);
 - ``world/<foot>/steps``  Points3D, one marker per step (stance onset), shown as a trail;
 - ``world/<foot>/step_cov``  Ellipsoids3D, flat k-sigma ellipse of the horizontal position
   covariance at each step, on the floor under the marker;
@@ -91,6 +93,12 @@ class FootPaths:
         return f"{self.root}/line"
 
     @property
+    def smoothed(self) -> str:
+        """Per-sample IMU positions smoothed step by step (Points3D), logged at their own times once
+        their step has ended (``pipeline.step_smoother``)."""
+        return f"{self.root}/smoothed"
+
+    @property
     def steps(self) -> str:
         """One marker per step at stance onset (Points3D)."""
         return f"{self.root}/steps"
@@ -161,6 +169,11 @@ class FootPaths:
         """Foot clearance from each swing's floor hits past and future (``pipeline.swing_clearance``),
         m, logged each swing about 0.25 s after it ends, in the clearance view."""
         return f"{self.clearance}/swing"
+
+    @property
+    def smoothed_clearance(self) -> str:
+        """Foot clearance of the step-smoothed track, m, in the clearance view (logged with it)."""
+        return f"{self.clearance}/smoothed"
 
     @property
     def stride_clearance(self) -> str:
