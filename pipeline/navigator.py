@@ -219,6 +219,8 @@ class Navigator:
         self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels), rate_hz)
         self.level_updates: list[tuple[int, float]] | None = None
         """When a list: each stance height update, as (sample index since alignment, level height)."""
+        self._filter_inputs: tuple[F64, F64, F64, F64, NDArray[np.bool_], F64] | None = None
+        """The filter's inputs of the last batch: acc, gyr, clipped-rate variance, Δt, stance, T/γ."""
 
     @property
     def aligned(self) -> bool:
@@ -324,6 +326,7 @@ class Navigator:
         gyr_var = clip_variance(batch)
         still_c = np.ascontiguousarray(still)
         ratio = zupt_ratio(stat, threshold)
+        self._filter_inputs = (acc, gyr, gyr_var, dt, still_c, ratio)  # for subclasses that keep them
         floor_z: F64 | None = None
         floor_c: F64 | None = None
         ranges: RangeOutputs | None = None

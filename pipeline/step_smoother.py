@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 
 from pipeline import eskf
 from pipeline.nav_types import NavBatch, SmoothedSpan
-from pipeline.navigator import NavConfig, Navigator, NavStats, clip_variance, zupt_ratio
+from pipeline.navigator import NavConfig, Navigator, NavStats
 from pipeline.samples import ImuBatch
 from pipeline.smoother import _backward_mean_pass, _backward_pass, store_span
 from pipeline.stance_levels import StanceLevelParams, StanceLevels, height_update
@@ -49,9 +49,10 @@ from pipeline.tof_aiding import RangeBatch, TofConfig
 F64 = NDArray[np.float64]
 
 STEP_CLOSE_AFTER_S = 0.1
-"""A window closes when a stance has lasted this long (or at its end, if shorter), s. Measured on
-the PyShoe trials (ARMSE-2D mean, prototype without the stance levels): 0 / 0.05 / 0.2 s and at the
-stance's end 0.0601 / 0.0598 / 0.0593 / 0.0598 m (the whole-recording smoother 0.0593)."""
+"""A window closes when a stance has lasted this long (or at its end, if shorter), s: the foot is
+flat by then, and the stance level's update falls there too (``pipeline.stance_levels``). Chosen
+before measuring; on the PyShoe trials (ARMSE-2D mean) 0 / 0.05 / 0.1 / 0.2 / 0.3 s give 0.0606 /
+0.0600 / 0.0599 / 0.0600 / 0.0600 m (the whole-recording smoother 0.0591)."""
 MAX_WINDOW_S = 5.0
 """A window is closed after this long without one, s (memory: 3.9 KB per sample while closing)."""
 
@@ -119,24 +120,14 @@ class StepSmoothingNavigator(Navigator):
             return super()._run(batch, stat, threshold, still)
         if self._checkpoint is None:
             self._checkpoint = (self._x.copy(), self._P.copy(), 0)
-        dt = eskf.sample_intervals(batch.t_s, self._t_last, self.config.dt_max_s)  # as Navigator._run
         first = self.stats.samples_out
         out = super()._run(batch, stat, threshold, still)
-        n = len(batch)
-        gyr_var = clip_variance(batch)
-        inputs = (
-            np.ascontiguousarray(batch.acc_b_mps2, dtype=np.float64),
-            np.ascontiguousarray(batch.gyr_b_radps, dtype=np.float64),
-            gyr_var if gyr_var.shape[0] else np.zeros((n, 3)),
-            dt,
-            np.ascontiguousarray(still),
-            zupt_ratio(stat, threshold),
-            batch.t_s,
-            out.pos_n_m[:, 2] - out.clearance_m,
-        )
-        self._pieces.append((first, inputs))
-        spans = [self._close(b) for b in self._closes(first, still)]
-        return dataclasses.replace(out, smoothed=SmoothedSpan.concat(spans))
+        assert self._filter_inputs is not None
+        self._pieces.append((first, (*self._filter_inputs, batch.t_s, out.pos_n_m[:, 2] - out.clearance_m)))
+        closes = self._closes(first, still)
+        if not closes:
+            return out
+        return dataclasses.replace(out, smoothed=SmoothedSpan.concat([self._close(b) for b in closes]))
 
     def _closes(self, first: int, still: NDArray[np.bool_]) -> list[int]:
         """Indices of the samples after which windows close in a batch starting at sample ``first``."""
@@ -248,7 +239,9 @@ def _load_kernels(with_covariance: bool) -> None:
 def _split(
     pieces: list[tuple[int, tuple[NDArray[np.generic], ...]]], a: int, b: int
 ) -> tuple[tuple[NDArray[np.generic], ...], list[tuple[int, tuple[NDArray[np.generic], ...]]]]:
-    """The inputs of samples a..b (contiguous arrays) and the pieces left after b."""
+    """The inputs of samples a..b (contiguous arrays) and the pieces left after b. A piece's
+    clipped-rate variance (input 2) has no rows when none of its samples is clipped; the window's has
+    none when none of its pieces has any."""
     parts: list[list[NDArray[np.generic]]] = [[] for _ in range(_N_INPUTS)]
     rest = []
     for first, arrays in pieces:
@@ -256,10 +249,13 @@ def _split(
         lo, hi = max(a, first) - first, min(b + 1, first + n) - first
         if hi > lo:
             for i, arr in enumerate(arrays):
-                parts[i].append(arr[lo:hi])
+                parts[i].append(arr[lo:hi])  # (a clipped-rate variance without rows stays without)
         if first + n > b + 1:
             cut = max(b + 1 - first, 0)
             rest.append((first + cut, tuple(arr[cut:] for arr in arrays)))
+    if any(v.shape[0] for v in parts[2]):
+        lengths = [p.shape[0] for p in parts[0]]
+        parts[2] = [v if v.shape[0] else np.zeros((m, 3)) for v, m in zip(parts[2], lengths, strict=True)]
     window = tuple(np.ascontiguousarray(p[0] if len(p) == 1 else np.concatenate(p)) for p in parts)
     return window, rest
 

@@ -379,15 +379,18 @@ def tof_columns(nav: NavBatch, paths: FootPaths, totals: NDArray[np.int64]) -> l
     return out
 
 
-def smoothed_columns(span: SmoothedSpan, paths: FootPaths) -> list[SendColumns]:
-    """The step-smoothed track and its clearance (``pipeline.step_smoother``), at the samples' own
-    times (empty for an empty span)."""
-    if not len(span):
+def smoothed_columns(span: SmoothedSpan, paths: FootPaths, *, every: int = 1) -> list[SendColumns]:
+    """The step-smoothed track and its clearance (``pipeline.step_smoother``) at the samples' own
+    times, of the samples whose index (``span.first_sample`` + row) is a multiple of ``every`` (so
+    decimation does not depend on where steps end); empty when there are none."""
+    sl = slice((-span.first_sample) % every, None, every)
+    t_s = span.t_s[sl]
+    if not len(t_s):
         return []
-    pos = np.asarray(span.pos_n_m, dtype=np.float32)
+    pos = np.asarray(span.pos_n_m[sl], dtype=np.float32)
     return [
-        (paths.smoothed, time_column(span.t_s), rr.Points3D.columns(positions=pos)),
-        *series_columns(paths.smoothed_clearance, span.t_s, span.clearance_m),
+        (paths.smoothed, time_column(t_s), rr.Points3D.columns(positions=pos)),
+        *series_columns(paths.smoothed_clearance, t_s, span.clearance_m[sl]),
     ]
 
 

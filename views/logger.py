@@ -58,6 +58,9 @@ DEFAULT_ELLIPSOID_EVERY = 10
 CLOSE_TIMEOUT_S = 10.0
 DEFAULT_SERIES_EVERY = 10
 """Speed and heading are plotted at 100 Hz of a 1 kHz stream (every 10th sample)."""
+SMOOTHED_EVERY = 10
+"""The step-smoothed track and clearance are logged for every 10th sample (100 Hz of a 1 kHz stream:
+the same trail and plot, a tenth of the file and the logging)."""
 LINE_PERIOD_S = 0.5
 """The decimated track line is re-logged at most this often, in device time and in wall time (≤ 2 Hz)."""
 LINE_POINT_SPACING_S = 0.1
@@ -443,7 +446,7 @@ class RerunLogger:
         )
         columns_list += convert.tof_columns(nav, paths, self._tof_totals.setdefault(foot, np.zeros(3, np.int64)))
         if nav.smoothed is not None:
-            columns_list += convert.smoothed_columns(nav.smoothed, paths)
+            columns_list += convert.smoothed_columns(nav.smoothed, paths, every=SMOOTHED_EVERY)
         tracker = self._swing.get(foot)
         if tracker is None and nav.floor_z_m is not None:  # a ToF unit: its floor is tracked from now on
             tracker = self._swing[foot] = SwingClearanceTracker(TofConfig().snap_m)

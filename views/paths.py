@@ -9,8 +9,8 @@ so two feet become siblings under ``world/`` and in each plot:
 - ``world/<foot>/cov``    Ellipsoids3D, k-sigma position covariance in the navigation frame
   (sibling of ``pose``, positioned with ``centers``: it must not inherit the foot rotation);
 - ``world/<foot>/line``   LineStrips3D, the decimated track, re-logged at most twice a second;
-- ``world/<foot>/smoothed``  Points3D, the track smoothed step by step, logged once each step has
-  ended, shown as a trail (its clearance: ``plots/clearance/<foot>/smoothed``);
+- ``world/<foot>/smoothed``  Points3D, the track smoothed step by step (every 10th sample), logged
+  once each step has ended, shown as a trail (its clearance: ``plots/clearance/<foot>/smoothed``);
 - ``world/<foot>/steps``  Points3D, one marker per step (stance onset), shown as a trail;
 - ``world/<foot>/step_cov``  Ellipsoids3D, flat k-sigma ellipse of the horizontal position
   covariance at each step, on the floor under the marker;
@@ -94,8 +94,8 @@ class FootPaths:
 
     @property
     def smoothed(self) -> str:
-        """Per-sample IMU positions smoothed step by step (Points3D), logged at their own times once
-        their step has ended (``pipeline.step_smoother``)."""
+        """IMU positions smoothed step by step (Points3D, every 10th sample), logged at their own
+        times once their step has ended (``pipeline.step_smoother``)."""
         return f"{self.root}/smoothed"
 
     @property
