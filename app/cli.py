@@ -61,6 +61,15 @@ def _add_config_args(p: argparse.ArgumentParser, *, profile: bool = True) -> Non
         )
 
 
+def _add_step_smoothing_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--step-smoothing",
+        action="store_true",
+        default=None,
+        help="also show each step smoothed once it has ended ([filter] step_smoothing; README, Accuracy)",
+    )
+
+
 def _add_output_args(p: argparse.ArgumentParser, *, capture: bool) -> None:
     p.add_argument("--save", type=Path, metavar="FILE.rrd", help="also write the recording to this file")
     p.add_argument("--no-viewer", action="store_true", help="do not open a viewer (save only)")
@@ -110,6 +119,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_output_args(demo, capture=True)
     _add_config_args(demo)
+    _add_step_smoothing_arg(demo)
     _add_stance_arg(demo, default="inertial")
     demo.add_argument(
         "--feet", type=int, choices=(1, 2), default=1, help="emulated shoes: 1, or 2 (left and right)"
@@ -185,6 +195,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --dual-imu: IMU 2's position in IMU 1's axes, m (default 0.01 0.01 0)",
     )
     _add_config_args(live)
+    _add_step_smoothing_arg(live)
     _add_stance_arg(live, default="inertial")
     live.add_argument(
         "--rate-divider",
@@ -257,6 +268,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="leave the ToF readings out (the inertial-only result of the same recording)",
     )
     _add_config_args(replay)
+    _add_step_smoothing_arg(replay)
     _add_stance_arg(replay, default=None)
     _add_output_args(replay, capture=False)
 
@@ -372,6 +384,7 @@ def _config(args: argparse.Namespace) -> Config:
     cfg.set("unit.profile", getattr(args, "profile", None), CLI)
     cfg.set("unit.rate_divider", getattr(args, "rate_divider", None), CLI)
     cfg.set("session.sessions_dir", str(args.sessions) if getattr(args, "sessions", None) else None, CLI)
+    cfg.set("filter.step_smoothing", getattr(args, "step_smoothing", None), CLI)
     if getattr(args, "no_capture", False):
         cfg.set("session.capture", False, CLI)
     cfg.profile()  # an unknown profile name is an error now, not mid-session

@@ -329,19 +329,23 @@ def apply_capture_settings(cfg: Config, nav_json: dict[str, Any], source: str) -
             if name not in cfg.profiles or cfg.profiles[name][0] != up:
                 cfg.profiles[name] = (up, source)
             cfg.set("unit.profile", name, source)
+    def recorded(key: str, value: Any, where: str) -> None:
+        if cfg.source(key) != CLI:  # the command line still wins
+            cfg.set(key, value, where)
+
     for section in ("filter", "detector", "tof"):
         table = nav_json.get(section, {})
         if isinstance(table, dict):
             for key, value in table.items():
                 if f"{section}.{key}" in cfg.values:
-                    cfg.set(f"{section}.{key}", value, source)
+                    recorded(f"{section}.{key}", value, source)
     filter_table = nav_json.get("filter")
     if isinstance(filter_table, dict) and "stance_levels" not in filter_table:
         # recorded before the stance height levels existed: its live estimates had none
-        cfg.set("filter.stance_levels", False, f"{source} (recorded before stance levels)")
+        recorded("filter.stance_levels", False, f"{source} (recorded before stance levels)")
     if isinstance(filter_table, dict) and "gravity_mps2" not in filter_table:
         # recorded before gravity was configured: its live estimates took |f| at rest for gravity
-        cfg.set("filter.gravity_mps2", 0.0, f"{source} (recorded before gravity_mps2)")
+        recorded("filter.gravity_mps2", 0.0, f"{source} (recorded before gravity_mps2)")
     if isinstance(filter_table, dict) and "step_smoothing" not in filter_table:
-        # recorded before step smoothing: its live filter held the stance levels as states
-        cfg.set("filter.step_smoothing", False, f"{source} (recorded before step smoothing)")
+        # recorded before step smoothing existed: its live session had none
+        recorded("filter.step_smoothing", False, f"{source} (recorded before step smoothing)")

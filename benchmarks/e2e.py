@@ -22,6 +22,9 @@
    of walk, default 60), then ``footnav replay CAPTURE --speed max --save out.rrd --no-viewer``
    timed by the wall clock, with its CPU time and peak RSS from ``wait4``.
 
+With ``--step-smoothing`` both run with step smoothing (``pipeline.step_smoother``: the live
+sessions' configuration, and the demo that makes the capture, whose replay then follows it).
+
 Peak RSS is ``ru_maxrss`` of the footnav process (the ``_live`` child, or ``footnav replay``).
 Nothing here asserts a timing; target figures from issue 9 are printed beside the measured ones.
 """
@@ -116,7 +119,7 @@ class _Collected:
     samples: int = 0
 
 
-def _live(ports: list[str], samples: int, save: Path | None, sessions: Path, out: Path) -> int:
+def _live(ports: list[str], samples: int, save: Path | None, sessions: Path, out: Path, step_smoothing: bool) -> int:
     """``footnav live`` on ``ports`` with a timing sink per foot; stop (as Ctrl-C does) once every
     foot has handed ``samples`` samples to its sinks; save what the sinks saw to ``out`` (npz)."""
     from app.config import defaults
@@ -150,6 +153,8 @@ def _live(ports: list[str], samples: int, save: Path | None, sessions: Path, out
         return sink
 
     cfg = defaults()
+    if step_smoothing:
+        cfg.set("filter.step_smoothing", True, "benchmark --step-smoothing")
     cfg.set("session.sessions_dir", str(sessions), "benchmark")
     opts = LiveOptions(
         ports=dict(zip(feet, ports, strict=True)), config=cfg, save=save, viewer=False, capture=True, collect=collect
@@ -242,7 +247,7 @@ def _env() -> dict[str, str]:
     return env
 
 
-def live_run(feet: int, seconds: float, work: Path, *, rerun: bool = True) -> LiveResult:
+def live_run(feet: int, seconds: float, work: Path, *, rerun: bool = True, step_smoothing: bool = False) -> LiveResult:
     """Emulator child + footnav child, real time; latencies and CPU from their logs. ``rerun=False``:
     no Rerun output at all (the baseline for the logging's share)."""
     tag = f"live{feet}" + ("" if rerun else "-norerun")
@@ -262,6 +267,7 @@ def live_run(feet: int, seconds: float, work: Path, *, rerun: bool = True) -> Li
         with open(work / f"{tag}-live.stderr", "w") as err:
             live = subprocess.Popen(
                 [sys.executable, "-m", "benchmarks.e2e", "_live", *hello["ports"], "--samples", str(samples),
+                 *(["--step-smoothing"] if step_smoothing else []),
                  *(["--save", str(rrd)] if rerun else []), "--sessions", str(sessions), "--out", str(live_log)],
                 cwd=ROOT, env=_env(), stdout=subprocess.DEVNULL, stderr=err,
             )  # fmt: skip
@@ -319,13 +325,13 @@ class ReplayResult:
     rrd_mb: float
 
 
-def replay_run(minutes: float, work: Path) -> ReplayResult:
+def replay_run(minutes: float, work: Path, step_smoothing: bool = False) -> ReplayResult:
     footnav = [sys.executable, "-m", "app"]
     sessions = work / "replay-sessions"
     t0 = time.perf_counter()
     gen = subprocess.Popen(
         [*footnav, "demo", "--feet", "2", "--pace", "max", "--duration", str(minutes * 60.0), "--no-viewer",
-         "--sessions", str(sessions)],
+         "--sessions", str(sessions), *(["--step-smoothing"] if step_smoothing else [])],
         cwd=ROOT, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
     )  # fmt: skip
     generate = _wait(gen, t0)
@@ -416,10 +422,11 @@ def main(argv: list[str] | None = None) -> int:
         ap.add_argument("--save", type=Path)
         ap.add_argument("--sessions", type=Path)
         ap.add_argument("--out", type=Path, required=True)
+        ap.add_argument("--step-smoothing", action="store_true")
         a = ap.parse_args(argv)
         if a.cmd == "_serve":
             return _serve(a.feet, a.seconds, a.out)
-        return _live(a.ports, a.samples, a.save, a.sessions, a.out)
+        return _live(a.ports, a.samples, a.save, a.sessions, a.out, a.step_smoothing)
 
     ap = argparse.ArgumentParser(prog="python -m benchmarks.e2e", description=__doc__.splitlines()[0])
     ap.add_argument("--one-foot-s", type=float, default=30.0, help="live one-foot run, s (default 30; 0 skips)")
@@ -429,6 +436,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--replay-minutes", type=float, default=60.0, help="two-feet capture to replay (60; 0 skips)")
     ap.add_argument("--keep", type=Path, help="keep the files (captures, .rrd, logs) in this folder")
+    ap.add_argument(
+        "--step-smoothing", action="store_true", help="live sessions and the replayed capture with step smoothing"
+    )
     args = ap.parse_args(argv)
 
     from benchmarks.run import machine
@@ -443,15 +453,16 @@ def main(argv: list[str] | None = None) -> int:
         else:
             work = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="footnav-bench-")))
         print(f"\n  {'figure':50s} {'measured':>22s}  {'target (#9)':>14s}  note")
+        smooth = args.step_smoothing
         if args.one_foot_s > 0:
-            report_live(live_run(1, args.one_foot_s, work))
-        base = live_run(2, args.baseline_s, work, rerun=False) if args.baseline_s > 0 else None
+            report_live(live_run(1, args.one_foot_s, work, step_smoothing=smooth))
+        base = live_run(2, args.baseline_s, work, rerun=False, step_smoothing=smooth) if args.baseline_s > 0 else None
         if args.two_feet_s > 0:
-            report_live(live_run(2, args.two_feet_s, work), base)
+            report_live(live_run(2, args.two_feet_s, work, step_smoothing=smooth), base)
         if base is not None:
             report_live(base)
         if args.replay_minutes > 0:
-            report_replay(replay_run(args.replay_minutes, work))
+            report_replay(replay_run(args.replay_minutes, work, step_smoothing=smooth))
     print(f"\n  load average (1/5/15 min) at the end: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
     return 0
 

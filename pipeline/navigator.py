@@ -76,9 +76,11 @@ class NavConfig:
             the still start for gravity instead (0 or less here, as before 2026-12) hides the bias
             along gravity in g, where the filter's bias states cannot see it, and turns it into an
             unmodelled error as soon as the foot tilts (README "Accuracy", the consistency paragraph).
-        step_smoothing: a live session also shows each step smoothed once it has ended
-            (``pipeline.step_smoother``; its causal filter holds the stance levels as constants). The
-            :class:`Navigator` itself is causal only: :func:`make_navigator` picks the class.
+        step_smoothing: a live session (and its replay) also shows each step smoothed once it has
+            ended (``pipeline.step_smoother``; its causal filter holds the stance levels as constants).
+            Off by default: it costs a live session of two feet at 1 kHz about 3 % of a core and an
+            hour's replay about half its time again (README "Accuracy"). The :class:`Navigator`
+            itself is causal only: ``step_smoother.make_navigator`` picks the class.
     """
 
     profile: UnitProfile = field(default_factory=lambda: get_profile("mpu6500x4"))
@@ -94,7 +96,7 @@ class NavConfig:
     max_wait_s: float = 30.0
     stance_levels: bool = True
     gravity_mps2: float = G0_MPS2
-    step_smoothing: bool = True
+    step_smoothing: bool = False
 
 
 @dataclass

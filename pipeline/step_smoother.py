@@ -184,7 +184,9 @@ class StepSmoothingNavigator(Navigator):
         buffers = _buffers(m)
         inputs = (acc, gyr, gyr_var, dt, still, ratio)
         store_span(x, P, 0, m, inputs, self._par, local, [k for k, _ in local], level_r, buffers, self._work)
-        self._checkpoint = (x, P, sum(1 for k, _ in updates if k <= b))
+        while applied < len(updates) and updates[applied][0] <= b:  # in order of their samples
+            applied += 1
+        self._checkpoint = (x, P, applied)
         self._window_start = b + 1
         self.closes.append(b)
         xf, Pf, xp, Pp, fn, Rm = buffers

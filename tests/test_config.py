@@ -98,6 +98,28 @@ def test_a_capture_recorded_before_gravity_was_configured_replays_with_the_gravi
     assert now.nav_config().gravity_mps2 == 9.80665
 
 
+def test_step_smoothing_replays_as_recorded_unless_the_command_line_says() -> None:
+    """A capture replays with the step smoothing its session had (none before it existed); the
+    command line's ``--step-smoothing`` wins over the capture, as over the file."""
+    on = defaults()
+    on.set("filter.step_smoothing", True, "file footnav.toml")
+    replay = defaults()
+    apply_capture_settings(replay, on.to_json(), "capture new.mcap")
+    assert replay.nav_config().step_smoothing is True
+    old = defaults().to_json()
+    del old["filter"]["step_smoothing"]
+    replay = defaults()
+    replay.set("filter.step_smoothing", True, "file footnav.toml")
+    apply_capture_settings(replay, old, "capture old.mcap")
+    assert replay.nav_config().step_smoothing is False
+    assert "before step smoothing" in replay.source("filter.step_smoothing")
+    asked = defaults()
+    asked.set("filter.step_smoothing", True, CLI)
+    apply_capture_settings(asked, old, "capture old.mcap")
+    apply_capture_settings(asked, defaults().to_json(), "capture new.mcap")
+    assert asked.nav_config().step_smoothing is True and asked.source("filter.step_smoothing") == CLI
+
+
 @pytest.mark.parametrize(
     ("text", "needle"),
     [

@@ -37,7 +37,8 @@ def _column(tbl: pa.Table, name: str) -> np.ndarray:
 def demo_rrd(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
     path = tmp_path_factory.mktemp("demo") / "demo.rrd"
     proc = _run_demo(
-        "--path", "rectangle", "--duration", "60", "--save", str(path), "--pace", "max", "--sessions", str(path.parent)
+        "--path", "rectangle", "--duration", "60", "--save", str(path), "--pace", "max", "--sessions", str(path.parent),
+        "--step-smoothing",
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     return path, proc.stdout + proc.stderr
@@ -86,10 +87,11 @@ def test_recording_holds_every_sample_on_one_timeline(demo_rrd: tuple[Path, str]
 
 
 def test_recording_holds_the_step_smoothed_track(demo_rrd: tuple[Path, str]) -> None:
-    """Each step's samples smoothed once it has ended (``pipeline.step_smoother``), logged at their own
-    times: all but the last open step. (Whether smoothing helps is measured on real feet,
-    ``tests/test_accuracy.py``: the emulated walk's few millimetres are mostly its heading's, which no
-    smoother changes; measured 6.82 mm RMS against 6.76 causal.)"""
+    """With ``--step-smoothing``, each step's samples smoothed once it has ended
+    (``pipeline.step_smoother``), logged at their own times: all but the last open step. (Whether
+    smoothing helps is measured on real feet, ``tests/test_accuracy.py``: the emulated walk's few
+    millimetres are mostly its heading's, which no smoother changes; measured 6.82 mm RMS against
+    6.76 causal.)"""
     path, _ = demo_rrd
     store = RrdReader(path).stream().collect()
 
