@@ -327,15 +327,19 @@ def _add_recording_args(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_smooth_arg(parser: argparse.ArgumentParser) -> None:
-    from app.export import SMOOTHING
-
-    parser.add_argument(
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument(
         "--smooth",
-        nargs="?",
-        const=SMOOTHING[0],
-        choices=SMOOTHING,
-        help="smoothed solution instead of the causal filter's: of the whole recording (the default), "
-        "or step by step, as a live session shows each step once it has ended",
+        action="store_const",
+        const="whole",
+        help="the RTS-smoothed solution of the whole recording instead of the causal filter's",
+    )
+    group.add_argument(
+        "--step-smoothing",
+        dest="smooth",
+        action="store_const",
+        const="step",
+        help="each step smoothed once it has ended, as a --step-smoothing session shows it",
     )
 
 

@@ -59,7 +59,7 @@ def test_pyshoe_vicon_trials_smoothed(shared_data: Path) -> None:
 
 def test_pyshoe_vicon_trials_step_smoothed(shared_data: Path) -> None:
     """The issue's 0.06 m mean ARMSE-2D live: each step smoothed once the foot stands again, as a
-    live session shows it (``pipeline.step_smoother``, ``footnav evaluate --smooth step``): measured
+    live session shows it (``pipeline.step_smoother``, ``footnav evaluate --step-smoothing``): measured
     0.0599 / 0.051 / 0.119 m (mean / median / max), the causal filter 0.0669, the whole smoother 0.0591."""
     rows, problems = run_evaluate([shared_data / "pyshoe-vicon"], smooth="step")
     assert not problems

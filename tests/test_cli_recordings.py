@@ -71,6 +71,25 @@ def test_evaluate_prints_a_table_and_summary(shared_data: Path) -> None:
     assert "82 gyroscope values taken as clipped at the sensor's range (36 raised by the reconstruction" in proc.stdout
 
 
+def test_evaluate_smoothed_whole_or_step_by_step(shared_data: Path) -> None:
+    """``--smooth`` (the whole recording) and ``--step-smoothing`` (each step once it has ended, as a
+    --step-smoothing session shows it) take no value, so a path may follow either; not both at once.
+    On this slow 2018 trial: causal 0.046 m, step-smoothed 0.023 m, whole 0.024 m (measured 2026-12-02)."""
+    trial = str(shared_data / "pyshoe-vicon" / "2018-02-09-11-16-53.mat")
+    armse = re.compile(r"ARMSE-2D mean ([\d.]+) m")
+    runs = {mode: _footnav("evaluate", *flags, trial) for mode, flags in (
+        ("causal", ()), ("whole", ("--smooth",)), ("step", ("--step-smoothing",)))}  # fmt: skip
+    values = {}
+    for mode, proc in runs.items():
+        assert proc.returncode == 0, proc.stderr
+        m = armse.search(proc.stdout)
+        assert m, proc.stdout
+        values[mode] = float(m[1])
+    assert values["step"] <= 0.03 and values["whole"] <= 0.03 and values["causal"] >= 0.04
+    both = _footnav("evaluate", "--smooth", "--step-smoothing", trial)
+    assert both.returncode == 2 and "not allowed with" in both.stderr
+
+
 def test_evaluate_without_the_stance_levels(shared_data: Path) -> None:
     """``--no-stance-levels`` is zero-velocity aiding alone: the x-io loop's height drift comes back
     (3D 0.248 m against 0.051 m with the levels, the horizontal 0.054 against 0.051 m)."""
