@@ -329,6 +329,7 @@ def apply_capture_settings(cfg: Config, nav_json: dict[str, Any], source: str) -
             if name not in cfg.profiles or cfg.profiles[name][0] != up:
                 cfg.profiles[name] = (up, source)
             cfg.set("unit.profile", name, source)
+
     def recorded(key: str, value: Any, where: str) -> None:
         if cfg.source(key) != CLI:  # the command line still wins
             cfg.set(key, value, where)

@@ -215,8 +215,8 @@ def run_export(
             )
         if smooth:
             raise FootnavError(
-                f"{source} is a footnav capture: --smooth is not available for captures (the smoother does not "
-                "take the ToF channel); drop it for the live estimates"
+                f"{source} is a footnav capture: --smooth and --step-smoothing are not available for captures "
+                "(the smoothers do not take the ToF channel); drop it for the live estimates"
             )
         return export_capture(source, out, steps_out)
     rec = load_recording(source, fmt, CsvMapping.parse(columns) if columns else None)

@@ -23,6 +23,10 @@ pass runs from b, where the smoothed estimate is the filtered one, down to the w
 pass reproduces the causal filter bit for bit (``tests/test_step_smoother.py``), and each window's
 result is the whole-recording smoother's on the recording cut at b.
 
+Sessions ask for it with ``--step-smoothing`` or ``[filter] step_smoothing`` (``NavConfig.step_smoothing``,
+:func:`make_navigator`); it is off by default for its cost (README "Accuracy": an hour's replay takes
+about two thirds longer, a live session a few per cent of a core more, within the noise).
+
 A window longer than ``max_window_s`` (a long stance, a foot that never stands) is closed there, to
 bound the memory the backward pass needs (about 3.9 KB per sample of a window). The stance height
 levels are constants here (``StanceLevelParams.level_states = 0``: the passes store the 15 error
@@ -97,7 +101,8 @@ class StepSmoothingNavigator(Navigator):
         self._pieces: list[tuple[int, tuple[NDArray[np.generic], ...]]] = []  # (first index, inputs)
         self._work = np.empty((2, eskf.N_STATE))
         self.closes: list[int] = []
-        """Index of each window's last sample, in order (0: the first sample after alignment)."""
+        """Index of each window's last sample, in order (0: the first sample after alignment; one
+        number per step)."""
         _load_kernels(with_covariance)
 
     def add_ranges(self, readings: RangeBatch) -> None:
@@ -204,8 +209,14 @@ class StepSmoothingNavigator(Navigator):
 def _buffers(m: int) -> tuple[F64, F64, F64, F64, F64, F64]:
     """What ``smoother.store_span`` keeps for m samples: xf, Pf, xp, Pp, fn, Rm."""
     n = eskf.N_STATE
-    states, covariances = (np.empty((m, 16)), np.empty((m, 16))), (np.empty((m, n, n)), np.empty((m, n, n)))
-    return states[0], covariances[0], states[1], covariances[1], np.empty((m, 3)), np.empty((m, 3, 3))
+    return (
+        np.empty((m, 16)),
+        np.empty((m, n, n)),
+        np.empty((m, 16)),
+        np.empty((m, n, n)),
+        np.empty((m, 3)),
+        np.empty((m, 3, 3)),
+    )
 
 
 _LOADED: set[bool] = set()
