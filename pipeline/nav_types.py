@@ -111,9 +111,11 @@ class SmoothedSpan:
             vel_n_mps=np.concatenate([s.vel_n_mps for s in spans]),
             quat_nb_wxyz=np.concatenate([s.quat_nb_wxyz for s in spans]),
             clearance_m=np.concatenate([s.clearance_m for s in spans]),
-            cov_pos_yaw=(
-                np.concatenate([s.cov_pos_yaw for s in spans if s.cov_pos_yaw is not None])
-                if all(s.cov_pos_yaw is not None for s in spans)
-                else None
-            ),
+            cov_pos_yaw=concat_if_all([s.cov_pos_yaw for s in spans]),
         )
+
+
+def concat_if_all(parts: list[F64 | None]) -> F64 | None:
+    """The arrays joined along their first axis when every part has one, else None."""
+    present = [p for p in parts if p is not None]
+    return np.concatenate(present) if len(present) == len(parts) else None

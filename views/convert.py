@@ -17,7 +17,7 @@ import numpy as np
 import rerun as rr
 from numpy.typing import NDArray
 
-from pipeline.nav_types import NavBatch, SmoothedSpan
+from pipeline.nav_types import NavBatch, SmoothedSpan, concat_if_all
 from pipeline.tof_update import USED as TOF_USED
 from views.paths import TIMELINE, FootPaths
 
@@ -126,11 +126,7 @@ def concat_batches(batches: Sequence[NavBatch]) -> NavBatch:
         detector_threshold=np.concatenate([np.broadcast_to(b.detector_threshold, (len(b),)) for b in batches]),
         clearance_m=np.concatenate([b.clearance_m for b in batches]),
         host_ns=np.concatenate([b.host_ns for b in batches]),
-        cov_pos_yaw=(
-            np.concatenate([b.cov_pos_yaw for b in batches if b.cov_pos_yaw is not None])
-            if all(b.cov_pos_yaw is not None for b in batches)
-            else None
-        ),
+        cov_pos_yaw=concat_if_all([b.cov_pos_yaw for b in batches]),
         smoothed=SmoothedSpan.concat([b.smoothed for b in batches if b.smoothed is not None]),
     )
 
