@@ -9,7 +9,7 @@ stance tells about earlier samples is mostly the velocity, tilt and bias errors 
 before it (measured on the PyShoe trials: causal 0.067 m ARMSE-2D, smoothed step by step 0.060,
 smoothed whole 0.059; README "Accuracy"). So the samples since the last step are smoothed when the
 next stance has lasted ``close_after_s`` (or ended, if shorter), conditioned on the data up to then:
-a track one step (about a second) behind the foot, as live as the causal one, which stays as it was
+a track one step (about a second) behind the foot, while the causal one stays as it was
 (Colomar, Nilsson, Händel, "Smoothing for ZUPT-aided INSs", IPIN 2012; Suh, Park, "A smoother for
 attitude and position estimation using inertial sensors with zero velocity intervals", IEEE Sensors
 J. 12(5), 2012: both smooth each step between zero-velocity intervals).
@@ -19,7 +19,8 @@ its start (a checkpoint). At a close at sample b the window is filtered again fr
 keeping what the Rauch-Tung-Striebel backward pass needs (``smoother.store_span``: the causal filter
 step for step, the stance height updates between its calls as in the navigator), and the backward
 pass runs from b, where the smoothed estimate is the filtered one, down to the window's first sample
-(``smoother._backward_pass``). The state after b is the next window's checkpoint. The second forward
+(``smoother._backward_mean_pass``, the states alone, for sessions; ``smoother._backward_pass`` with
+the covariance for ``step_smooth_recording``). The state after b is the next window's checkpoint. The second forward
 pass reproduces the causal filter bit for bit (``tests/test_step_smoother.py``), and each window's
 result is the whole-recording smoother's on the recording cut at b.
 
