@@ -287,9 +287,15 @@ def _backward_pass(
     On entry ``ds`` (15,) and ``Ps`` (15, 15) hold the smoothed error at sample ``last`` relative to
     ``xf[last]`` and its covariance, ``xs`` (16,) the smoothed nominal there; on exit, at sample 0.
     Writes the outputs of samples 0 .. last − 1 (and ``last`` when ``write_last``).
+
+    With ``out_cov`` of no rows the states alone are smoothed (``Ps`` is not used): δ^s_k = C δ⁻ =
+    P_k Fᵀ (P⁻)⁻¹ δ⁻ needs one vector solve with P⁻ instead of the 15 of C and no covariance
+    recursion, about 1 400 multiply-adds per sample instead of 9 000 (``pipeline.step_smoother``).
     """  # pragma: no cover
+    with_cov = out_cov.shape[0] > 0
     pos_yaw = (P0, P0 + 1, P0 + 2, TH0 + 2)
     dp = np.empty(N_STATE)
+    y = np.empty(N_STATE)
     B = np.empty((N_STATE, N_STATE))
     L = np.empty((N_STATE, N_STATE))
     Ct = np.empty((N_STATE, N_STATE))
@@ -302,13 +308,35 @@ def _backward_pass(
             k1 = k + 1
             # smoothed error at k+1 against the predicted nominal x̂⁻_{k+1}
             _error_vs_predicted(xs, xp, k1, dp)
-            # P̃ = J Ps Jᵀ, J = I − [ĉ/2]× on θ (inverse of the filter's reset at k+1)
-            c0, c1, c2 = _rot_diff_s(xf[k1], xp[k1])
-            rotate_attitude_block(Ps, -0.5 * c0, -0.5 * c1, -0.5 * c2)
+            if with_cov:
+                # P̃ = J Ps Jᵀ, J = I − [ĉ/2]× on θ (inverse of the filter's reset at k+1)
+                c0, c1, c2 = _rot_diff_s(xf[k1], xp[k1])
+                rotate_attitude_block(Ps, -0.5 * c0, -0.5 * c1, -0.5 * c2)
             if math.isnan(fn[k1, 0]):
                 # no propagation into k+1: x̂⁻_{k+1} = x̂_k, P⁻_{k+1} = P_k, C = I
                 for i in range(N_STATE):
                     ds[i] = dp[i]
+            elif not with_cov:
+                _f_times_p(Pf, k, fn, Rm, dt_s[k1], k1, B)
+                _scaled_cholesky(Pp, k1, d, L)
+                # y = (P⁻)⁻¹ δ⁻ = D (L Lᵀ)⁻¹ D δ⁻, then δ^s = Bᵀ y
+                for i in range(N_STATE):
+                    acc = d[i] * dp[i]
+                    for m in range(i):
+                        acc -= L[i, m] * y[m]
+                    y[i] = acc / L[i, i]
+                for i in range(N_STATE - 1, -1, -1):
+                    acc = y[i]
+                    for m in range(i + 1, N_STATE):
+                        acc -= L[m, i] * y[m]
+                    y[i] = acc / L[i, i]
+                for i in range(N_STATE):
+                    y[i] *= d[i]
+                for i in range(N_STATE):
+                    acc = 0.0
+                    for m in range(N_STATE):
+                        acc += B[m, i] * y[m]
+                    ds[i] = acc
             else:
                 _f_times_p(Pf, k, fn, Rm, dt_s[k1], k1, B)
                 _scaled_cholesky(Pp, k1, d, L)
@@ -368,62 +396,9 @@ def _backward_pass(
             out_vel[k, r] = xs[3 + r]
         for r in range(4):
             out_quat[k, r] = xs[6 + r]
-            for c in range(4):
-                out_cov[k, r, c] = Ps[pos_yaw[r], pos_yaw[c]]
-
-
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
-def _backward_mean_pass(
-    xf: F64, xp: F64, Pf: F64, Pp: F64, fn: F64, Rm: F64, dt_s: F64, last: int,
-    out_pos: F64, out_vel: F64, out_quat: F64,
-) -> None:  # fmt: skip
-    """The smoothed states alone of :func:`_backward_pass`, from the filtered one at ``last`` (the
-    terminal condition of a window: ``pipeline.step_smoother``) down to sample 0, writing all of them.
-
-    δ^s_k = C δ⁻ = P_k Fᵀ (P⁻)⁻¹ δ⁻ needs one vector solve with P⁻ instead of the 15 of C and no
-    covariance recursion: about 1 400 multiply-adds per sample instead of 9 000.
-    """  # pragma: no cover
-    dp = np.empty(N_STATE)
-    ds = np.empty(N_STATE)
-    xs = xf[last].copy()
-    B = np.empty((N_STATE, N_STATE))
-    L = np.empty((N_STATE, N_STATE))
-    d = np.empty(N_STATE)
-    y = np.empty(N_STATE)
-    for k in range(last, -1, -1):
-        if k < last:
-            k1 = k + 1
-            _error_vs_predicted(xs, xp, k1, dp)
-            if math.isnan(fn[k1, 0]):
-                for i in range(N_STATE):
-                    ds[i] = dp[i]
-            else:
-                _f_times_p(Pf, k, fn, Rm, dt_s[k1], k1, B)
-                _scaled_cholesky(Pp, k1, d, L)
-                # y = (P⁻)⁻¹ δ⁻ = D (L Lᵀ)⁻¹ D δ⁻, then δ^s = Bᵀ y
-                for i in range(N_STATE):
-                    acc = d[i] * dp[i]
-                    for m in range(i):
-                        acc -= L[i, m] * y[m]
-                    y[i] = acc / L[i, i]
-                for i in range(N_STATE - 1, -1, -1):
-                    acc = y[i]
-                    for m in range(i + 1, N_STATE):
-                        acc -= L[m, i] * y[m]
-                    y[i] = acc / L[i, i]
-                for i in range(N_STATE):
-                    y[i] *= d[i]
-                for i in range(N_STATE):
-                    acc = 0.0
-                    for m in range(N_STATE):
-                        acc += B[m, i] * y[m]
-                    ds[i] = acc
-            _inject_smoothed(xf, k, ds, xs)
-        for r in range(3):
-            out_pos[k, r] = xs[r]
-            out_vel[k, r] = xs[3 + r]
-        for r in range(4):
-            out_quat[k, r] = xs[6 + r]
+            if with_cov:
+                for c in range(4):
+                    out_cov[k, r, c] = Ps[pos_yaw[r], pos_yaw[c]]
 
 
 def store_span(

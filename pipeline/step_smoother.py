@@ -19,8 +19,8 @@ its start (a checkpoint). At a close at sample b the window is filtered again fr
 keeping what the Rauch-Tung-Striebel backward pass needs (``smoother.store_span``: the causal filter
 step for step, the stance height updates between its calls as in the navigator), and the backward
 pass runs from b, where the smoothed estimate is the filtered one, down to the window's first sample
-(``smoother._backward_mean_pass``, the states alone, for sessions; ``smoother._backward_pass`` with
-the covariance for ``step_smooth_recording``). The state after b is the next window's checkpoint. The second forward
+(``smoother._backward_pass``: the states alone for sessions, with the covariance for
+``step_smooth_recording``). The state after b is the next window's checkpoint. The second forward
 pass reproduces the causal filter bit for bit (``tests/test_step_smoother.py``), and each window's
 result is the whole-recording smoother's on the recording cut at b.
 
@@ -47,7 +47,7 @@ from pipeline import eskf
 from pipeline.nav_types import NavBatch, SmoothedSpan
 from pipeline.navigator import NavConfig, Navigator, NavStats
 from pipeline.samples import ImuBatch
-from pipeline.smoother import _backward_mean_pass, _backward_pass, store_span
+from pipeline.smoother import _backward_pass, store_span
 from pipeline.stance_levels import StanceLevelParams, StanceLevels, height_update
 from pipeline.tof_aiding import RangeBatch, TofConfig
 
@@ -76,7 +76,7 @@ class StepSmoothingNavigator(Navigator):
         close_after_s: stance time after which a window closes, s.
         max_window_s: longest window, s.
         with_covariance: also smooth the covariance (``SmoothedSpan.cov_pos_yaw``); it costs most of
-            the work (``smoother._backward_mean_pass``), so live sessions go without.
+            the work (``smoother._backward_pass``), so live sessions go without.
     """
 
     def __init__(
@@ -104,7 +104,7 @@ class StepSmoothingNavigator(Navigator):
         self.closes: list[int] = []
         """Index of each window's last sample, in order (0: the first sample after alignment; one
         number per step)."""
-        _load_kernels(with_covariance)
+        _load_kernels()
 
     def add_ranges(self, readings: RangeBatch) -> None:
         if len(readings) and self.smoothing:
@@ -197,14 +197,10 @@ class StepSmoothingNavigator(Navigator):
         self.closes.append(b)
         xf, Pf, xp, Pp, fn, Rm = buffers
         pos, vel, quat = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 4))
-        cov = None
-        if self.with_covariance:
-            cov = np.empty((m, 4, 4))
-            ds, Ps, xs = np.zeros(eskf.N_STATE), Pf[m - 1].copy(), xf[m - 1].copy()
-            _backward_pass(xf, Pf, xp, Pp, fn, Rm, dt, m - 1, True, ds, Ps, xs, pos, vel, quat, cov)
-        else:
-            _backward_mean_pass(xf, xp, Pf, Pp, fn, Rm, dt, m - 1, pos, vel, quat)
-        return SmoothedSpan(a, t, pos, vel, quat, pos[:, 2] - floor, cov)
+        cov = np.empty((m if self.with_covariance else 0, 4, 4))  # no rows: the states alone
+        ds, Ps, xs = np.zeros(eskf.N_STATE), Pf[m - 1].copy(), xf[m - 1].copy()
+        _backward_pass(xf, Pf, xp, Pp, fn, Rm, dt, m - 1, True, ds, Ps, xs, pos, vel, quat, cov)
+        return SmoothedSpan(a, t, pos, vel, quat, pos[:, 2] - floor, cov if self.with_covariance else None)
 
 
 def _buffers(m: int) -> tuple[F64, F64, F64, F64, F64, F64]:
@@ -220,14 +216,14 @@ def _buffers(m: int) -> tuple[F64, F64, F64, F64, F64, F64]:
     )
 
 
-_LOADED: set[bool] = set()
+_LOADED: list[bool] = []
 
 
-def _load_kernels(with_covariance: bool) -> None:
+def _load_kernels() -> None:
     """Compile (or load from numba's cache) the smoothing kernels now, on three still samples, so
     that a live session's first step does not stall the stream while they compile (several seconds
     on a fresh install)."""
-    if with_covariance in _LOADED:
+    if _LOADED:
         return
     m, g = 3, 9.80665
     acc, gyr = np.tile([0.0, 0.0, g], (m, 1)), np.zeros((m, 3))
@@ -242,12 +238,9 @@ def _load_kernels(with_covariance: bool) -> None:
     store_span(x, P, 0, m, inputs, par, [], [], 1e-4, buffers, np.empty((2, eskf.N_STATE)))
     xf, Pf, xp, Pp, fn, Rm = buffers
     out = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 4))
-    if with_covariance:
-        ds, Ps, xs, cov = np.zeros(eskf.N_STATE), Pf[-1].copy(), xf[-1].copy(), np.empty((m, 4, 4))
-        _backward_pass(xf, Pf, xp, Pp, fn, Rm, dt, m - 1, True, ds, Ps, xs, *out, cov)
-    else:
-        _backward_mean_pass(xf, xp, Pf, Pp, fn, Rm, dt, m - 1, *out)
-    _LOADED.add(with_covariance)
+    ds, Ps, xs = np.zeros(eskf.N_STATE), Pf[-1].copy(), xf[-1].copy()
+    _backward_pass(xf, Pf, xp, Pp, fn, Rm, dt, m - 1, True, ds, Ps, xs, *out, np.empty((m, 4, 4)))
+    _LOADED.append(True)
 
 
 def _split(
