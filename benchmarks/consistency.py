@@ -48,7 +48,7 @@ from device.emulator.gait import GaitTruth, simulate_walk
 from device.emulator.imu_errors import AXIS_ERRORS, IMU_GRADES, ImuGrade, corrupt
 from pipeline import eskf
 from pipeline.alignment import align_from_still
-from pipeline.navigator import NO_CLIPPED_RATES, NavConfig, filter_parameters, initial_error_sigmas, navigate
+from pipeline.navigator import NO_CLIPPED_RATES, NavConfig, filter_start, navigate
 from pipeline.profiles import UnitProfile, get_profile
 
 F64 = np.ndarray
@@ -108,11 +108,7 @@ def navigate_true_stances(truth: GaitTruth, acc_b_mps2: F64, gyr_b_radps: F64, p
     """
     cfg = NavConfig(profile=profile)
     start = max(2, round(cfg.align_s * RATE_HZ))
-    al = align_from_still(acc_b_mps2[:start], gyr_b_radps[:start])
-    x = np.zeros(eskf.N_STATE + 1)
-    x[6:10] = al.quat_nb_wxyz
-    P = np.diag(initial_error_sigmas(cfg, profile) ** 2)
-    par = filter_parameters(profile, RATE_HZ, al.gravity_for(cfg.gravity_mps2), cfg.dt_max_s)
+    x, P, par = filter_start(cfg, RATE_HZ, align_from_still(acc_b_mps2[:start], gyr_b_radps[:start]))
     n = truth.t_s.shape[0] - start
     pos, vel, quat, cov = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
     eskf.run_filter(

@@ -37,8 +37,7 @@ from pipeline.navigator import (
     NO_CLIPPED_RATES,
     NavConfig,
     Navigator,
-    filter_parameters,
-    initial_error_sigmas,
+    filter_start,
     navigate,
     zupt_ratio,
 )
@@ -172,11 +171,7 @@ def main(argv: list[str] | None = None) -> int:
     # the filter's own inputs: aligned start, the detector's stance flags, the profile's parameters
     stat, threshold, stance = StreamingDetector(cfg.detector, RATE_HZ).update(acc, gyr)
     ratio = zupt_ratio(stat, threshold)
-    al = align_from_still(acc[:500], gyr[:500])
-    x0 = np.zeros(16)
-    x0[6:10] = al.quat_nb_wxyz
-    P0 = np.diag(np.square(initial_error_sigmas(cfg, cfg.profile)))
-    par = filter_parameters(cfg.profile, RATE_HZ, al.gravity_mps2, cfg.dt_max_s)
+    x0, P0, par = filter_start(cfg, RATE_HZ, align_from_still(acc[:500], gyr[:500]))
     dt = np.diff(t, prepend=t[0] - 1.0 / RATE_HZ)
 
     def filter_run(m: int) -> tuple[np.ndarray, ...]:

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline import eskf
-from pipeline.alignment import align_from_still
+from pipeline.alignment import Alignment, align_from_still
 from pipeline.baro import PressureAltimeter, PressureAltitude, PressureBatch
 from pipeline.clearance import StrideClearance, StrideClearanceTracker
 from pipeline.detectors import DetectorParams, StreamingDetector
@@ -146,6 +146,17 @@ def initial_error_sigmas(cfg: InitialSigmas, profile: UnitProfile, imus: int = 1
             *biases,
         ]
     )
+
+
+def filter_start(config: NavConfig, rate_hz: float, alignment: Alignment) -> tuple[F64, F64, F64]:
+    """The filter's nominal state (16,), covariance (15, 15) and parameters (``eskf.N_PAR``,) after
+    the alignment ``alignment`` of a still start, as the navigator starts it: the aligned attitude at
+    the origin, at rest; the biases at 0, their prior the profile's (a quiet foot may still turn)."""
+    x = np.zeros(16)
+    x[6:10] = alignment.quat_nb_wxyz
+    P = np.diag(initial_error_sigmas(config, config.profile) ** 2)
+    par = filter_parameters(config.profile, rate_hz, alignment.gravity_for(config.gravity_mps2), config.dt_max_s)
+    return x, P, par
 
 
 def filter_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float, dt_max_s: float) -> F64:
@@ -287,12 +298,7 @@ class Navigator:
         self.stats.samples_before_alignment += start
         window = slice(start, start + need)
         al = align_from_still(batch.acc_b_mps2[window], batch.gyr_b_radps[window])
-        cfg, prof = self.config, self.config.profile
-        x = np.zeros(16)
-        x[6:10] = al.quat_nb_wxyz  # biases start at the profile's prior, 0: a quiet foot may still turn
-        self._x = x
-        self._P = np.diag(initial_error_sigmas(cfg, prof) ** 2)
-        self._par = filter_parameters(prof, self.rate_hz, al.gravity_for(cfg.gravity_mps2), cfg.dt_max_s)
+        self._x, self._P, self._par = filter_start(self.config, self.rate_hz, al)
         self.stats.aligned_at_s = float(batch.t_s[start])
         self._t_last = float(batch.t_s[start]) - 1.0 / self.rate_hz  # one nominal interval before
         rest = batch.select(slice(start, None))
