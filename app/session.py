@@ -39,7 +39,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-LIVE_READ_INTERVAL_S = 0.005  # coalesce reads: about 5 packets a batch at 1 kHz (see OpenShoeUnit)
+LIVE_READ_INTERVAL_S = 0.010  # coalesce reads: about 10 packets a batch at 1 kHz (see OpenShoeUnit)
 IDLE_NOTICE_S = 1.0  # a unit that stops streaming is noticed within this long
 LINK_HEALTH_PERIOD_S = 0.5
 """Link health (rate, loss, reconnects) is logged every this much device time."""

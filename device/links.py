@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final, Literal, Self
 
 from device import protocol
-from device.framer import DataPacket, Framer
+from device.framer import DataPacket, Framer, PacketRun
 from pipeline.errors import DeviceError
 
 if TYPE_CHECKING:
@@ -426,14 +426,20 @@ class ReconnectingLink:
             gap.end_ns = now
             self._stalled = False
             self._unreported = gap
-        for frame in self._framer.feed(data):
+        # only the first and the last packet of the read matter here: runs are not split into packets
+        for frame in self._framer.feed_runs(data):
             if type(frame) is DataPacket:
-                if gap is not None and gap.first_packet_after is None:
-                    gap.first_packet_after = frame.number
-                    self._gap = gap = None
-                self._last_number = frame.number
-                self._packet_len = len(frame.payload) + 6
-                self._streamed = True
+                first, last, payload_len = frame.number, frame.number, len(frame.payload)
+            elif type(frame) is PacketRun:
+                first, last, payload_len = int(frame.numbers[0]), int(frame.numbers[-1]), frame.payloads.shape[1]
+            else:
+                continue
+            if gap is not None and gap.first_packet_after is None:
+                gap.first_packet_after = first
+                self._gap = gap = None
+            self._last_number = last
+            self._packet_len = payload_len + 6
+            self._streamed = True
         unreported = self._unreported
         if unreported is not None and unreported.first_packet_after is not None:
             self._report_resumed()
