@@ -74,6 +74,8 @@ class SerialLink:
                 return b""
             raise DeviceError(f"{self.port} is not open")
         transport = self._writer.transport if self._writer is not None else None
+        if not isinstance(transport, asyncio.ReadTransport):  # pragma: no cover - serial transports read
+            transport = None
         if transport is not None:
             transport.resume_reading()
         try:
