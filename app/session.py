@@ -229,6 +229,7 @@ async def _session_samples(
     on_window: Callable[[], None] | None = None,
     use_ranges: bool = True,
     raw: bool = False,
+    join_samples: int = 0,
 ) -> AsyncIterator[Any]:
     """The unit's IMU batches (and ToF and barometer readings, when the unit sends them; or, with
     ``raw``, the ``RawImuBatch`` es of the multi-IMU output 0x28 of e.g. the dual-IMU board) with time
@@ -242,7 +243,7 @@ async def _session_samples(
     when not ``use_ranges``."""
     in_window = window is None
     received = 0
-    batches = cast(AsyncGenerator[Any, None], _raw_batches(unit) if raw else _imu_and_readings(unit))
+    batches = cast(AsyncGenerator[Any, None], _raw_batches(unit) if raw else _imu_and_readings(unit, join_samples))
     # The pending anext survives idle timeouts: cancelling it (asyncio.wait_for) would end the generator.
     pending: asyncio.Future[Any] | None = None
     async with contextlib.aclosing(batches):
@@ -275,9 +276,10 @@ async def _session_samples(
                         if item is not None:
                             yield item
                     continue
-                if host_clock is not None:
-                    host = host_clock(int(batch.host_ns[0]))
-                    batch = dataclasses.replace(batch, host_ns=np.full(len(batch), host, dtype=np.int64))
+                if host_clock is not None:  # per read: a joined batch holds several
+                    stamps, read_of = np.unique(batch.host_ns, return_inverse=True)
+                    mapped = np.array([host_clock(int(h)) for h in stamps], dtype=np.int64)
+                    batch = dataclasses.replace(batch, host_ns=mapped[read_of])
                 if result.device_t0_s is None:
                     result.device_t0_s = float(batch.t_s[0])
                     result.first_counter = int(batch.counter[0])
@@ -315,12 +317,34 @@ async def _corrected(samples: AsyncIterator[Any], calibration: ImuCalibration) -
         yield calibration.correct(item) if isinstance(item, ImuBatch) else item
 
 
-async def _imu_and_readings(unit: OpenShoeUnit) -> AsyncGenerator[ImuBatch | TofBatch | BaroBatch, None]:
-    """The IMU, ToF and barometer batches of :meth:`OpenShoeUnit.batches`, in arrival order."""
+async def _imu_and_readings(
+    unit: OpenShoeUnit, join_samples: int = 0
+) -> AsyncGenerator[ImuBatch | TofBatch | BaroBatch, None]:
+    """The IMU, ToF and barometer batches of :meth:`OpenShoeUnit.batches`, in arrival order.
+
+    ``join_samples > 0``: consecutive IMU batches are joined until they hold that many samples (or
+    another kind of batch, or the end, comes). For a replay at full speed, whose reads are all there
+    at once: the unit still frames and orders each captured read as it did live, and everything
+    after it pays its per-batch cost once per join instead of once per read (README "Speed")."""
+    held: list[ImuBatch] = []
+    held_samples = 0
     async with contextlib.aclosing(unit.batches()) as stream:
         async for batch in stream:
-            if isinstance(batch, ImuBatch | TofBatch | BaroBatch):
-                yield batch
+            if not isinstance(batch, ImuBatch | TofBatch | BaroBatch):
+                continue
+            if isinstance(batch, ImuBatch) and join_samples > 0:
+                held.append(batch)
+                held_samples += len(batch)
+                if held_samples >= join_samples:
+                    yield ImuBatch.concat(held)
+                    held, held_samples = [], 0
+                continue
+            if held:
+                yield ImuBatch.concat(held)
+                held, held_samples = [], 0
+            yield batch
+        if held:
+            yield ImuBatch.concat(held)
 
 
 async def run_device_session(
@@ -406,6 +430,7 @@ async def run_unit_session(
     mode: Mode | None = None,
     extensions: bool = False,
     use_ranges: bool = True,
+    join_samples: int = 0,
 ) -> SerialSessionResult:
     """Navigate an open unit's stream (see :func:`run_device_session`); ``start=False`` for a replay,
     where the captured bytes already hold the start and no stop is sent; ``idle_notice_s=None`` never
@@ -413,7 +438,8 @@ async def run_unit_session(
     unit its MCU id before the start and apply its calibration file (a replay passes one only when the
     capture holds that exchange); ``mode``: the output mode (see :func:`run_device_session`);
     ``extensions``: switch the ToF and barometer states on after the start; ``use_ranges=False``
-    leaves the ToF readings out of the navigation. Closes the unit."""
+    leaves the ToF readings out of the navigation; ``join_samples``: IMU batches joined to this
+    many samples (a replay at full speed: ``_imu_and_readings``). Closes the unit."""
     result = result if result is not None else SerialSessionResult()
     name = unit.link.name
 
@@ -456,6 +482,7 @@ async def run_unit_session(
             on_window,
             use_ranges,
             raw=isinstance(mode, RawImuMode),
+            join_samples=join_samples,
         )
         if stored is not None and mode is None:
             samples = _corrected(samples, stored.calibration)

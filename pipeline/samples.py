@@ -49,6 +49,8 @@ class ImuBatch:
     @staticmethod
     def concat(batches: list[ImuBatch]) -> ImuBatch:
         """Join batches in order into one (clipped flags where any batch has them)."""
+        if len(batches) == 1:
+            return batches[0]
         clipped = None
         if any(b.gyr_clipped_b is not None for b in batches):
             clipped = np.concatenate(
