@@ -19,7 +19,7 @@ from mcap.writer import Writer
 from app.config import defaults
 from app.demo import DemoOptions, run_demo
 from app.export import run_export
-from app.replay import ReplayOptions, run_replay
+from app.replay import FULL_SPEED_JOIN_SAMPLES, ReplayOptions, run_replay
 from device.capture import (
     FLUSH_PERIOD_S,
     CaptureInfo,
@@ -84,6 +84,22 @@ def test_replay_equals_live_exactly(tmp_path: Path, pace: float, duration_s: flo
     assert unit.settings["rate_divider_log2"] == 0 and unit.settings["nav_config"]["profile"]["name"]
     assert unit.command_set and unit.calibration
     assert_identical(live["foot"], replay(path)["foot"])
+
+
+def test_full_speed_replay_joins_reads_into_large_batches(tmp_path: Path) -> None:
+    """Paced live, a read holds a few packets; replayed at full speed the navigator gets batches of
+    about ``FULL_SPEED_JOIN_SAMPLES`` (the same estimates); replayed paced, one batch per read."""
+    path, live = demo_capture(tmp_path, pace=4.0, duration_s=6.0)
+    joined, make = collector()
+    assert run_replay(ReplayOptions(path=path, config=defaults(), viewer=False, collect=make)) == 0
+    per_read, make_paced = collector()
+    assert run_replay(ReplayOptions(path=path, config=defaults(), viewer=False, collect=make_paced, speed=50.0)) == 0
+    sizes = [len(b) for b in joined["foot"]]
+    # the navigator holds the still start for its alignment, then passes each batch through
+    assert all(n >= FULL_SPEED_JOIN_SAMPLES for n in sizes[1:-1]), sizes
+    assert len(per_read["foot"]) > 5 * len(sizes)
+    assert_identical(live["foot"], concat_batches(joined["foot"]))
+    assert_identical(live["foot"], concat_batches(per_read["foot"]))
 
 
 def test_two_feet_capture_replays_both(tmp_path: Path) -> None:
