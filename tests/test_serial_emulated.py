@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import array
 import asyncio
 import contextlib
+import fcntl
 import math
 import os
 import termios
@@ -133,6 +135,27 @@ async def test_no_ack_is_a_device_error(bare_pty: str) -> None:
         with pytest.raises(DeviceError, match=r"no answer from .* to the start command within 0\.3 s"):
             await unit.start_imu_stream(timeout_s=0.3)
         assert time.monotonic() - t0 < 2.0
+
+
+async def test_the_port_is_polled_only_while_a_read_waits() -> None:
+    """Between reads the unit's bytes wait in the kernel's tty queue, not in the event loop (one
+    wake-up per read instead of one per packet: README "Speed"); the next read returns them all."""
+    master, slave = os.openpty()
+    tty.setraw(slave, termios.TCSANOW)
+    try:
+        async with SerialLink(os.ttyname(slave)) as link:
+            os.write(master, b"a")
+            assert await link.read() == b"a"
+            for _ in range(5):
+                os.write(master, b"bc")
+                await asyncio.sleep(0.02)  # the event loop runs, the port is not read
+            waiting = array.array("i", [0])
+            fcntl.ioctl(slave, termios.FIONREAD, waiting)
+            assert waiting[0] == 10
+            assert await link.read() == b"bc" * 5
+    finally:
+        os.close(master)
+        os.close(slave)
 
 
 async def test_missing_port_is_a_device_error() -> None:
