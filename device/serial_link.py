@@ -74,9 +74,7 @@ class SerialLink:
                 return b""
             raise DeviceError(f"{self.port} is not open")
         transport = self._writer.transport if self._writer is not None else None
-        if not isinstance(transport, asyncio.ReadTransport):  # pragma: no cover - serial transports read
-            transport = None
-        if transport is not None:
+        if isinstance(transport, asyncio.ReadTransport):
             transport.resume_reading()
         try:
             data = await self._reader.read(max_bytes)
@@ -86,7 +84,7 @@ class SerialLink:
             raise DeviceError(f"the unit on {self.port} was disconnected ({exc})") from exc
         if not data and not self._closed:
             raise DeviceError(f"the unit on {self.port} was disconnected (end of stream)")
-        if transport is not None and not transport.is_closing():
+        if isinstance(transport, asyncio.ReadTransport) and not transport.is_closing():
             transport.pause_reading()
         return data
 
