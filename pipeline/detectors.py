@@ -80,7 +80,7 @@ class DetectorParams:
 _KIND_CODE: dict[str, int] = {"shoe": 0, "amv": 1, "amag": 2, "are": 3}
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pairwise_block(a: F64, lo: int, n: int) -> float:  # pragma: no cover - compiled
     """Σ a[lo:lo+n], n ≤ 128, in the order of numpy's pairwise summation (8 accumulators)."""
     if n < 8:
@@ -108,7 +108,7 @@ def _pairwise_block(a: F64, lo: int, n: int) -> float:  # pragma: no cover - com
     return res
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pairwise_sum(a: F64, lo: int, n: int) -> float:  # pragma: no cover - compiled
     """Σ a[lo:lo+n] in the order of ``numpy.add.reduce`` over a contiguous axis (pairwise: blocks of
     at most 128 terms, halved at multiples of 8 above), so the compiled statistic reproduces the
@@ -146,7 +146,7 @@ def _pairwise_sum(a: F64, lo: int, n: int) -> float:  # pragma: no cover - compi
     return vals[0]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _statistic_kernel(
     acc: F64,
     gyr: F64,
@@ -235,7 +235,7 @@ def statistic(acc_b_mps2: F64, gyr_b_radps: F64, window: int, p: DetectorParams)
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _quantile_sorted(v: F64, n: int, q: float) -> float:  # pragma: no cover - compiled
     """``numpy.quantile(v[:n], q)`` (method "linear") of sorted finite values, to the last bit."""
     virtual = (n - 1) * q
@@ -251,7 +251,7 @@ def _quantile_sorted(v: F64, n: int, q: float) -> float:  # pragma: no cover - c
     return a + diff * gamma
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sort_in_place(a: F64) -> None:  # pragma: no cover - compiled
     """Shell sort (Ciura's gaps) of a short array: as fast as ``np.sort`` at ~100 values and much
     quicker for numba to compile."""
@@ -266,7 +266,7 @@ def _sort_in_place(a: F64) -> None:  # pragma: no cover - compiled
             a[j] = v
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _merge_sorted(vals: F64, n: int, rem: F64, add: F64, out: F64) -> int:  # pragma: no cover - compiled
     """out[:m] = vals[:n] − rem + add, sorted, for sorted finite ``vals``, ``rem`` (a sub-multiset of
     vals[:n]) and ``add``; returns m. One pass whose rare branches (a removal, an insertion) predict
@@ -294,7 +294,7 @@ def _merge_sorted(vals: F64, n: int, rem: F64, add: F64, out: F64) -> int:  # pr
     return no
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _adaptive_threshold_kernel(
     log_stat: F64,
     seen: int,

@@ -18,7 +18,7 @@ GYR_FULL_SCALE_RADPS = math.radians(1.0) / 16.4 * 32766.5
 """Likewise for the gyroscope at ±2000 °/s (16.4 LSB per °/s)."""
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def sample_ok(f: F64, w: F64, acc_fs: float, gyr_fs: float) -> bool:  # pragma: no cover - compiled
     """One IMU's sample ``f`` (3,), ``w`` (3,) is finite and below full scale on every axis."""
     for r in range(3):

@@ -209,7 +209,7 @@ def concat_tracks(parts: list[DualEskfTrack]) -> DualEskfTrack:
     return DualEskfTrack(**arrays, counters=last.counters, messages=last.messages)
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 def _inject(x: F64, P: F64, dx: F64) -> None:
     """Add ``dx`` (21,) to the nominal ``x`` (22,), reset it to zero and ``P`` (Solà §7.2-7.3)."""  # pragma: no cover
     for c in range(3):
@@ -222,7 +222,7 @@ def _inject(x: F64, P: F64, dx: F64) -> None:
         dx[i] = 0.0
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 def run_dual_filter(
     x: F64,
     P: F64,

@@ -118,7 +118,7 @@ class DualTrack:
     messages: tuple[str, ...] = ()
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 def run_paper_filter(
     x: F64,
     P: F64,

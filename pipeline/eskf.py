@@ -571,7 +571,7 @@ def _correct(
         counters[CNT_ZARU_REJECTED] += 1
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 def run_filter(
     x: F64,
     P: F64,

@@ -29,7 +29,7 @@ from pipeline.eskf import _inv3_spd
 F64 = NDArray[np.float64]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pattern(F: F64) -> tuple[NDArray[np.int64], NDArray[np.int64]]:  # pragma: no cover - compiled
     """Row pointers and column indices (CSR) of the entries of ``F`` that are not zero."""
     n = F.shape[0]
@@ -45,7 +45,7 @@ def pattern(F: F64) -> tuple[NDArray[np.int64], NDArray[np.int64]]:  # pragma: n
     return ptr, idx[:k]
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 def propagate(P: F64, F: F64, ptr: NDArray[np.int64], idx: NDArray[np.int64], q_diag: F64, M: F64) -> None:
     """``P ← F P Fᵀ + diag(q_diag)`` in place, visiting only ``F``'s structural non-zeros.
 
@@ -71,7 +71,7 @@ def propagate(P: F64, F: F64, ptr: NDArray[np.int64], idx: NDArray[np.int64], q_
             P[i, j] = P[j, i]
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 def update3(
     dx: F64, P: F64, H: F64, y: F64, r: F64, work: F64, gate: float = np.inf, r_gate: F64 | None = None
 ) -> float:

@@ -111,7 +111,7 @@ def _rot_diff_s(a: F64, b: F64) -> tuple[float, float, float]:  # pragma: no cov
     return _quat_log_s(qw, qx, qy, qz)
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 def _storing_pass(
     x: F64,
     P: F64,
@@ -199,7 +199,7 @@ def _storing_segment(
         )  # fmt: skip
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _error_vs_predicted(xs: F64, xp: F64, k1: int, dp: F64) -> None:  # pragma: no cover
     """dp (15,) = the smoothed nominal ``xs`` (16,) ⊖ the predicted nominal ``xp[k1]``."""
     for r in range(3):
@@ -210,7 +210,7 @@ def _error_vs_predicted(xs: F64, xp: F64, k1: int, dp: F64) -> None:  # pragma: 
     dp[TH0], dp[TH0 + 1], dp[TH0 + 2] = _rot_diff_s(xs, xp[k1])
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _f_times_p(Pf: F64, k: int, fn: F64, Rm: F64, dt: float, k1: int, B: F64) -> None:  # pragma: no cover
     """B = F_{k+1} P_k (rows of p, v, θ change; ``eskf._propagate_cov``'s row operations)."""
     s = -dt
@@ -231,7 +231,7 @@ def _f_times_p(Pf: F64, k: int, fn: F64, Rm: F64, dt: float, k1: int, B: F64) ->
             B[V0 + r, j] += s * (Rm[k1, r, 0] * b0 + Rm[k1, r, 1] * b1 + Rm[k1, r, 2] * b2)
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _scaled_cholesky(Pp: F64, k1: int, d: F64, L: F64) -> None:  # pragma: no cover
     """d = diag(P⁻)^-½ and the Cholesky factor of the unit-diagonal scaling: D P⁻_{k+1} D = L Lᵀ."""
     for i in range(N_STATE):
@@ -249,7 +249,7 @@ def _scaled_cholesky(Pp: F64, k1: int, d: F64, L: F64) -> None:  # pragma: no co
             L[i, j] = acc / ljj
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _inject_smoothed(xf: F64, k: int, ds: F64, xs: F64) -> None:  # pragma: no cover
     """xs (16,) = x̂_k ⊕ δ^s_k."""
     for r in range(3):
@@ -263,7 +263,7 @@ def _inject_smoothed(xf: F64, k: int, ds: F64, xs: F64) -> None:  # pragma: no c
     xs[6], xs[7], xs[8], xs[9] = qw / norm, qx / norm, qy / norm, qz / norm
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 def _backward_pass(
     xf: F64,
     Pf: F64,

@@ -60,7 +60,7 @@ MAX_LEVELS = 256
 drifts more than ``same_level_m`` per stride, as a fast run can, makes a level at every stance)."""
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 def height_update(x: F64, P: F64, level: int, z_level_m: float, r_m2: float, work: F64) -> None:
     """The stance height update 0 = p_z − z_level + w, var(w) = ``r_m2``, on ``x`` (n + 1,) and ``P``
     (n, n) in place: z_level is the error state ``level`` (nominal x[level + 1]) when ``level`` ≥ 0,

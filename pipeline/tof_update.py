@@ -54,7 +54,7 @@ RES_CODE, RES_Y, RES_H, RES_FLOOR_Z, RES_HIT_X, RES_HIT_Y, RES_S = range(7)
 N_RES = 7
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 def height_row(x: F64, lever_b_m: F64, dir_b: F64, range_m: float, H: F64) -> tuple[float, float, float, float]:
     """Fill H (n,) with the Jacobian row of g (the floor not a state); return (g(x̂) = p_z + w_z, w_x,
     w_y, (R̂ u_b)_z)."""  # pragma: no cover
@@ -83,7 +83,7 @@ def height_row(x: F64, lever_b_m: F64, dir_b: F64, range_m: float, H: F64) -> tu
     return x[2] + wz, wx, wy, uz
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 def tof_update(
     x: F64,
     P: F64,
