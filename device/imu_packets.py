@@ -18,6 +18,8 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.samples import diff_after
+
 TICK_HZ: Final = 64e6
 """IMU_TS is the CPU cycle counter at 64 MHz (``conf_clock.h`` CLOCK_FREQ); it wraps every ≈67.1 s."""
 TICK_WRAP: Final = 1 << 32
@@ -98,15 +100,6 @@ def encode_packets(
     return rec.tobytes()
 
 
-def _steps_after(last: int, raw: NDArray[np.int64]) -> NDArray[np.int64]:
-    """``np.diff(raw, prepend=last)`` (n,) without the concatenation, which costs more than the
-    difference for the few dozen values of one read."""
-    steps = np.empty_like(raw)
-    steps[0] = raw[0] - last
-    np.subtract(raw[1:], raw[:-1], out=steps[1:])
-    return steps
-
-
 class TickUnwrapper:
     """Turns the wrapping uint32 64 MHz tick counter into increasing float64 seconds.
 
@@ -129,7 +122,7 @@ class TickUnwrapper:
         if self._last_raw is None:
             self._last_raw = int(raw[0])
             self._last_total = int(raw[0])
-        steps = _steps_after(self._last_raw, raw)
+        steps = diff_after(self._last_raw, raw)
         wrapped = steps < 0
         self.wraps += int(np.count_nonzero(wrapped))
         steps[wrapped] += TICK_WRAP
@@ -171,7 +164,7 @@ class CounterTracker:
         raw = np.asarray(numbers, dtype=np.int64)
         if raw.size == 0 or self._last_raw is None or self._last_total != self._high:
             return False
-        return bool(np.all(_steps_after(self._last_raw, raw) % COUNTER_WRAP == 1))
+        return bool(np.all(diff_after(self._last_raw, raw) % COUNTER_WRAP == 1))
 
     def update(self, numbers: NDArray[np.integer]) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
         """Track the next package numbers (n,), in arrival order.
@@ -187,7 +180,7 @@ class CounterTracker:
         if self._last_raw is None:
             self._last_raw = int(raw[0]) - 1
             self._last_total = self._high = int(raw[0]) - 1
-        steps = (_steps_after(self._last_raw, raw) + COUNTER_WRAP // 2) % COUNTER_WRAP - COUNTER_WRAP // 2
+        steps = (diff_after(self._last_raw, raw) + COUNTER_WRAP // 2) % COUNTER_WRAP - COUNTER_WRAP // 2
         total = self._last_total + np.cumsum(steps)
         self._last_raw = int(raw[-1])
         self._last_total = int(total[-1])
@@ -268,7 +261,7 @@ class SharedTickClock:
             return np.empty(0, dtype=np.float64)
         if self._last_raw is None:
             self._last_raw = self._last_total = int(raw[0])
-        steps = (_steps_after(self._last_raw, raw) + TICK_WRAP // 2) % TICK_WRAP - TICK_WRAP // 2
+        steps = (diff_after(self._last_raw, raw) + TICK_WRAP // 2) % TICK_WRAP - TICK_WRAP // 2
         total = self._last_total + np.cumsum(steps)
         self._last_raw = int(raw[-1])
         self._last_total = int(total[-1])

@@ -104,6 +104,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s, quat_to_mat_into
+from pipeline.samples import diff_after
 
 F64 = NDArray[np.float64]
 
@@ -146,10 +147,7 @@ def sample_intervals(t_s: F64, t_prev_s: float, dt_max_s: float) -> F64:
     integrating one sample over seconds (or over a corrupt stamp's years) only adds error; the filter
     counts it as a gap. Non-positive or NaN intervals pass through: the filter skips and counts them.
     """
-    dt = np.empty(t_s.shape[0])
-    if dt.shape[0]:  # np.diff with prepend costs several µs per call, which live batches of one sample feel
-        dt[0] = t_s[0] - t_prev_s
-        np.subtract(t_s[1:], t_s[:-1], out=dt[1:])
+    dt = diff_after(t_prev_s, t_s)
     return np.minimum(dt, dt_max_s, out=dt)
 
 

@@ -3,11 +3,24 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]
+_Steps = TypeVar("_Steps", NDArray[np.float64], NDArray[np.int64])
+
+
+def diff_after(previous: float, values: _Steps) -> _Steps:
+    """``np.diff(values, prepend=previous)`` (n,): each value's step from the one before it, the first
+    from ``previous`` (the last of the previous batch). Without ``np.diff``'s concatenation, which
+    costs several µs per call: more than the difference itself for the few samples of a live batch."""
+    steps = np.empty_like(values)
+    if steps.shape[0]:
+        steps[0] = values[0] - previous
+        np.subtract(values[1:], values[:-1], out=steps[1:])
+    return steps
 
 
 @dataclass(frozen=True, slots=True)
