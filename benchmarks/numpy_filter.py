@@ -104,11 +104,15 @@ def _update(x: F64, P: F64, H: F64, y: F64, R: F64) -> tuple[F64, F64]:
 def _zaru(
     x: F64, P: F64, gyr_b_radps: F64, par: F64, H_bg: F64, R_zaru: F64, counters: NDArray[np.int64]
 ) -> tuple[F64, F64]:
-    """The χ²-gated zero-angular-rate update."""
+    """The χ²-gated zero-angular-rate update; a standing foot's turn about the vertical added to its
+    noise after the first stance (``pipeline.eskf``)."""
     y = gyr_b_radps - x[13:16]
     S = H_bg @ P @ H_bg.T + par[eskf.PAR_ZARU_GATE_SIG] ** 2 * _I3  # the gate's noise (pipeline.eskf)
     if float(y @ np.linalg.solve(S, y)) < par[eskf.PAR_ZARU_GATE]:
         counters[eskf.CNT_ZARU] += 1
+        if counters[eskf.FLAG_STARTED] and counters[eskf.STATE_STANCE_RUN] > par[eskf.PAR_STANDING_AFTER]:
+            up_b = quat_to_mat(x[6:10])[2]
+            R_zaru = R_zaru + par[eskf.PAR_STANDING_TURN] ** 2 * np.outer(up_b, up_b)
         return _update(x, P, H_bg, y, R_zaru)
     counters[eskf.CNT_ZARU_REJECTED] += 1
     return x, P
@@ -179,6 +183,11 @@ def run_filter_numpy(
             P = F @ P @ F.T + Q
             P = 0.5 * (P + P.T)
         counters[eskf.FLAG_LAST_REJECTED] = 0
+        if stance[k]:
+            counters[eskf.STATE_STANCE_RUN] += 1
+        else:
+            counters[eskf.FLAG_STARTED] |= counters[eskf.STATE_STANCE_RUN] > 0
+            counters[eskf.STATE_STANCE_RUN] = 0
         if stance[k] and not bad:
             omega = gyr_b_radps[k] - x[13:16]
             r_zupt = par[eskf.PAR_ZUPT] ** 2 + par[eskf.PAR_ROLL_LEVER] ** 2 * float(omega @ omega)

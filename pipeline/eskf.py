@@ -45,6 +45,19 @@ README). For the same
 reason the ZUPT noise admits the velocity of a foot rolling about a contact point at most r from
 the IMU: σ_v² = σ_zupt² + (r |ω|)², since |v_imu| = |ω × r| ≤ r |ω| for a rigid foot.
 
+A foot that stands for longer than a step (``PAR_STANDING_AFTER`` samples of one stance, 2 s; a
+walking stance lasts 0.4-1 s) is a standing foot: the floor holds its roll and pitch, but not its
+turn about the vertical (weight shifting, settling, turning on the spot). Its zero-rate update then
+carries that turn as noise along the navigation frame's vertical, R = σ_z² I + σ_s² u uᵀ with u the
+vertical in body axes and σ_s = ``PAR_STANDING_TURN`` (2 °/s, the size of the slow rocking measured
+in the long stances of the OpenShoe and x-io recordings: 1.5-2.6 °/s), so its slow residual rotation
+is not taken for a precise vertical bias whose correlation with the heading of the whole walk then
+moves the standing foot (OpenShoe's last 4.6 s moved it 8 cm). Not in the first stance: the still
+start is where the bias is learnt, and a unit is set down there on purpose (weakening it there took
+the OpenShoe loop to 0.17-0.28 m). Measured with ``footnav evaluate`` (README "Accuracy"): OpenShoe
+loop 0.097 → 0.041 m, x-io 0.050 → 0.057 m, PyShoe ARMSE-2D mean unchanged (0.067 m); σ_s 1-4 °/s
+after 1-2 s give 0.034-0.062 / 0.055-0.058 / 0.067-0.068 m.
+
 The vertical component's noise also grows with how close the detector's statistic T is to its
 threshold γ (``zupt_ratio`` = T/γ, in [0, 1] at a stance sample), σ_z² = σ_v² + σ_T² T/γ, while
 the horizontal ones stay σ_v²: a "soft" zero-velocity update, whose strength follows the detector's
@@ -130,13 +143,17 @@ P0, V0, TH0, BA0, BG0 = 0, 3, 6, 9, 12
     PAR_ZARU_GATE_SIG,
     PAR_ZUPT_GATE,
     PAR_ZUPT_GATE_RATIO,
-) = range(16)
-N_PAR = 16
+    PAR_STANDING_TURN,
+    PAR_STANDING_AFTER,
+) = range(18)
+N_PAR = 18
 
 # counters returned by run_filter
 CNT_BAD_DT, CNT_GAP, CNT_BAD_SAMPLE, CNT_UPDATES, CNT_ZARU, CNT_ZARU_REJECTED, CNT_ZUPT_REJECTED = range(7)
 FLAG_LAST_REJECTED = 7  # not a count: 1 when the last sample's zero-velocity update was rejected
-N_CNT = 8
+STATE_STANCE_RUN = 8  # not a count: stance samples in a row up to the current one
+FLAG_STARTED = 9  # not a count: 1 once the first stance (the still start) has ended
+N_CNT = 10
 
 
 def sample_intervals(t_s: F64, t_prev_s: float, dt_max_s: float) -> F64:
@@ -295,7 +312,16 @@ def _update3(x: F64, P: F64, s0: int, y: F64, r: float, work: F64) -> None:
 @njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _update3_diag(x: F64, P: F64, s0: int, y: F64, r0: float, r1: float, r2: float, work: F64) -> None:
     """Kalman update for a measurement z of the three error states s0, s0+1, s0+2 (noise
-    diag(r0, r1, r2)).
+    diag(r0, r1, r2)); see :func:`_update3_sym`."""  # pragma: no cover
+    _update3_sym(x, P, s0, y, r0, 0.0, 0.0, r1, 0.0, r2, work)
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _update3_sym(
+    x: F64, P: F64, s0: int, y: F64, r00: float, r01: float, r02: float, r11: float, r12: float, r22: float, work: F64
+) -> None:
+    """Kalman update for a measurement z of the three error states s0, s0+1, s0+2 (noise R, symmetric,
+    given by its upper triangle r00 .. r22).
 
     H = rows s0..s0+2 of the identity. Joseph form, expanded for this H (only rank-3 work):
     (I−KH) P (I−KH)ᵀ + K R Kᵀ = P − K P[s,:] − P[:,s] Kᵀ + K (P[s,s] + R) Kᵀ.
@@ -304,8 +330,8 @@ def _update3_diag(x: F64, P: F64, s0: int, y: F64, r0: float, r1: float, r2: flo
     ``work`` is (10, n) scratch.
     """  # pragma: no cover
     n = P.shape[0]
-    s00, s01, s02 = P[s0, s0] + r0, P[s0, s0 + 1], P[s0, s0 + 2]
-    s11, s12, s22 = P[s0 + 1, s0 + 1] + r1, P[s0 + 1, s0 + 2], P[s0 + 2, s0 + 2] + r2
+    s00, s01, s02 = P[s0, s0] + r00, P[s0, s0 + 1] + r01, P[s0, s0 + 2] + r02
+    s11, s12, s22 = P[s0 + 1, s0 + 1] + r11, P[s0 + 1, s0 + 2] + r12, P[s0 + 2, s0 + 2] + r22
     i00, i01, i02, i11, i12, i22 = _inv3_spd(s00, s01, s02, s11, s12, s22)
     y0, y1, y2 = y[0], y[1], y[2]
     # rows of ``work``: 0-2 Kᵀ = S⁻¹ P[s, :], 3-5 (K S)ᵀ, 6-8 P[s, :] (kept: P is overwritten), 9 δx
@@ -532,6 +558,18 @@ def zupt_gate(ratio: float, gate_nis: float, sure_below: float) -> float:
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def track_stance(stance_k: bool, counters: NDArray[np.int64]) -> None:
+    """Count the stance samples in a row (``STATE_STANCE_RUN``) and mark the end of the first stance
+    (``FLAG_STARTED``), for the standing foot's zero-rate noise (module docstring)."""  # pragma: no cover
+    if stance_k:
+        counters[STATE_STANCE_RUN] += 1
+    else:
+        if counters[STATE_STANCE_RUN] > 0:
+            counters[FLAG_STARTED] = 1
+        counters[STATE_STANCE_RUN] = 0
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _correct(
     x: F64,
     P: F64,
@@ -563,7 +601,17 @@ def _correct(
         y[r] = gyr_b_radps[k, r] - x[13 + r]
     g2 = par[PAR_ZARU_GATE_SIG] ** 2
     if _nis3(P, BG0, y[0], y[1], y[2], g2, g2, g2) < par[PAR_ZARU_GATE]:
-        _update3(x, P, BG0, y, r_zaru, work)
+        s2 = par[PAR_STANDING_TURN] ** 2
+        if s2 > 0.0 and counters[FLAG_STARTED] == 1 and counters[STATE_STANCE_RUN] > par[PAR_STANDING_AFTER]:
+            # a standing foot: R = r I + σ² u uᵀ, u the navigation frame's vertical in body axes
+            qw, qx, qy, qz = x[6], x[7], x[8], x[9]
+            u0, u1, u2 = 2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx), qw * qw - qx * qx - qy * qy + qz * qz
+            _update3_sym(
+                x, P, BG0, y, r_zaru + s2 * u0 * u0, s2 * u0 * u1, s2 * u0 * u2,
+                r_zaru + s2 * u1 * u1, s2 * u1 * u2, r_zaru + s2 * u2 * u2, work,
+            )  # fmt: skip
+        else:
+            _update3(x, P, BG0, y, r_zaru, work)
         counters[CNT_ZARU] += 1
     else:
         counters[CNT_ZARU_REJECTED] += 1
@@ -692,6 +740,7 @@ def run_filter(
             if not bad:
                 _add_body_rate_noise(P, R0, gyr_clip_var_b, k, dt)
         counters[FLAG_LAST_REJECTED] = 0
+        track_stance(stance[k], counters)
         if stance[k] and not bad:
             _correct(x, P, gyr_b_radps, zupt_ratio, k, par, y, work, counters)
         for r in range(3):

@@ -49,6 +49,11 @@ foot is moving; ``pipeline.eskf``). 100-300 measured alike on the recordings; 50
 PyShoe trial 0.013 m of ARMSE-2D (0.156 → 0.169 m)."""
 ZUPT_GATE_RATIO = 0.5
 """Unsure: the detector's statistic above this share of its threshold (T/γ > 0.5)."""
+STANDING_AFTER_S = 2.0
+"""A stance this long is a standing foot, whose zero-rate update admits a turn about the vertical
+(``pipeline.eskf``), s."""
+STANDING_TURN_SIGMA_RADPS = math.radians(2.0)
+"""1σ of a standing foot's turn about the vertical in its zero-rate update (``pipeline.eskf``), rad/s."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -188,6 +193,8 @@ def filter_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float,
     par[eskf.PAR_ACC_SCALE] = profile.acc_scale_error
     par[eskf.PAR_GYR_SCALE] = profile.gyr_scale_error
     par[eskf.PAR_ZUPT_VERT_STAT] = profile.zupt_vertical_sigma_mps
+    par[eskf.PAR_STANDING_TURN] = STANDING_TURN_SIGMA_RADPS
+    par[eskf.PAR_STANDING_AFTER] = STANDING_AFTER_S * rate_hz
     return par
 
 

@@ -79,6 +79,7 @@ from pipeline.eskf import (
     _predict,
     rotate_attitude_block,
     sample_intervals,
+    track_stance,
 )
 from pipeline.nav_types import NavBatch
 from pipeline.navigator import NavConfig, Navigator, NavStats, clip_variance, nav_batch, zupt_ratio
@@ -128,6 +129,7 @@ def _storing_pass(
     Pp: F64,
     fn: F64,
     Rm: F64,
+    counters: NDArray[np.int64],
 ) -> None:
     """The causal filter over a segment (``run_filter``'s steps), keeping what the smoother needs.
     The stance height updates are applied between calls (``smooth_recording``).
@@ -135,7 +137,8 @@ def _storing_pass(
     For sample j: ``xp[j]``, ``Pp[j]`` nominal state and covariance after the propagation (before any
     update), ``xf[j]``, ``Pf[j]`` after the updates, ``fn[j]``, ``Rm[j]`` and ``dt_s[j]`` the blocks of
     F over the interval ending at j (``fn[j, 0]`` is NaN where there was no propagation, Δt ≤ 0).
-    ``x`` and ``P`` are advanced in place, as by ``run_filter``.
+    ``x``, ``P`` and ``counters`` (``eskf.N_CNT``: the stance the filter is in) are advanced in place,
+    as by ``run_filter``.
     """  # pragma: no cover
     n = acc_b_mps2.shape[0]
     if (
@@ -150,9 +153,9 @@ def _storing_pass(
         or Pp.shape[0] < n
         or fn.shape[0] < n
         or Rm.shape[0] < n
+        or counters.shape[0] != N_CNT
     ):
         raise ValueError("_storing_pass: inconsistent array shapes")
-    counters = np.zeros(N_CNT, dtype=np.int64)
     q_diag = np.zeros(N_STATE)
     y = np.empty(3)
     f_n = np.empty(3)
@@ -176,6 +179,7 @@ def _storing_pass(
                     Rm[k, r, c] = R0[r, c]
         else:
             fn[k, 0] = math.nan
+        track_stance(stance[k], counters)
         if stance[k] and not bad:
             _correct(x, P, gyr_b_radps, zupt_ratio, k, par, y, work, counters)
         for i in range(16):
@@ -187,7 +191,7 @@ def _storing_pass(
 
 def _storing_segment(
     x: F64, P: F64, lo: int, hi: int, a: int, acc: F64, gyr: F64, gyr_var: F64, dt: F64, stance: NDArray[np.bool_],
-    ratio: F64, par: F64, xf: F64, Pf: F64, xp: F64, Pp: F64, fn: F64, Rm: F64,
+    ratio: F64, par: F64, xf: F64, Pf: F64, xp: F64, Pp: F64, fn: F64, Rm: F64, counters: NDArray[np.int64],
 ) -> None:  # fmt: skip
     """:func:`_storing_pass` over samples lo..hi−1 of the recording, into the buffers of the segment
     that starts at sample ``a``."""
@@ -195,7 +199,7 @@ def _storing_segment(
         b = slice(lo - a, None)
         _storing_pass(
             x, P, acc[lo:hi], gyr[lo:hi], gyr_var[lo:hi], dt[lo:hi], stance[lo:hi], ratio[lo:hi], par,
-            xf[b], Pf[b], xp[b], Pp[b], fn[b], Rm[b],
+            xf[b], Pf[b], xp[b], Pp[b], fn[b], Rm[b], counters,
         )  # fmt: skip
 
 
@@ -413,8 +417,9 @@ def store_span(
     level_r: float,
     buffers: tuple[F64, F64, F64, F64, F64, F64],
     work: F64,
+    counters: NDArray[np.int64],
 ) -> None:
-    """The filter from ``x``, ``P`` (advanced in place) over samples ``a`` .. ``stop`` − 1 of
+    """The filter from ``x``, ``P`` and ``counters`` (advanced in place) over samples ``a`` .. ``stop`` − 1 of
     ``inputs`` (acc, gyr, gyr_var, dt, stance, T/γ, indexed alike), stored into ``buffers`` (xf, Pf,
     xp, Pp, fn, Rm, row 0 = sample ``a``) for :func:`_backward_pass`, with each stance height update
     (k, z) of ``level_updates`` (``level_at`` their k, sorted) for a ≤ k < stop applied after sample k.
@@ -422,16 +427,15 @@ def store_span(
     The run is split after each update's sample: the update runs here, from Python, as in the
     navigator, so both run the same compiled code (inlined into the pass, LLVM fused its arithmetic
     differently once the pass came from numba's cache)."""
-    acc, gyr, gyr_var, dt, stance, ratio = inputs
-    xf, Pf, xp, Pp, fn, Rm = buffers
+    xf, Pf = buffers[0], buffers[1]
     lo = a
     for j in range(bisect.bisect_left(level_at, a), bisect.bisect_left(level_at, stop)):
         k, z = level_updates[j]
-        _storing_segment(x, P, lo, k + 1, a, acc, gyr, gyr_var, dt, stance, ratio, par, xf, Pf, xp, Pp, fn, Rm)
+        _storing_segment(x, P, lo, k + 1, a, *inputs, par, *buffers, counters)
         height_update(x, P, -1, z, level_r, work)
         xf[k - a], Pf[k - a] = x, P
         lo = k + 1
-    _storing_segment(x, P, lo, stop, a, acc, gyr, gyr_var, dt, stance, ratio, par, xf, Pf, xp, Pp, fn, Rm)
+    _storing_segment(x, P, lo, stop, a, *inputs, par, *buffers, counters)
 
 
 class _CheckpointingNavigator(Navigator):
@@ -448,10 +452,10 @@ class _CheckpointingNavigator(Navigator):
         self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels, level_states=0), rate_hz)
         self.level_updates = []
         self.segment_samples = segment_samples
-        self.checkpoints: list[tuple[int, F64, F64, float, int]] = []
-        """Per segment: first sample, x, P, the time before it, and how many stance height updates
-        had been applied (one due after the sample before the segment is applied in the segment's
-        own run, after its checkpoint)."""
+        self.checkpoints: list[tuple[int, F64, F64, float, int, NDArray[np.int64]]] = []
+        """Per segment: first sample, x, P, the time before it, how many stance height updates had
+        been applied (one due after the sample before the segment is applied in the segment's own
+        run, after its checkpoint), and the filter's counters (the stance it is in)."""
         self.inputs: list[tuple[ImuBatch, NDArray[np.bool_], F64]] = []  # samples, stance, T/γ
 
     def _run(self, batch: ImuBatch, stat: F64, threshold: F64, still: NDArray[np.bool_]) -> NavBatch:
@@ -464,7 +468,9 @@ class _CheckpointingNavigator(Navigator):
         for a in range(0, n, seg):
             b = min(n, a + seg)
             done = len(self.level_updates or ())
-            self.checkpoints.append((offset + a, self._x.copy(), self._P.copy(), self._t_last, done))
+            self.checkpoints.append(
+                (offset + a, self._x.copy(), self._P.copy(), self._t_last, done, self._counters.copy())
+            )
             out = super()._run(batch.select(slice(a, b)), stat[a:b], threshold[a:b], still[a:b])
             pos[a:b], vel[a:b], quat[a:b], cov[a:b] = out.pos_n_m, out.vel_n_mps, out.quat_nb_wxyz, out.cov_pos_yaw
             clearance[a:b] = out.clearance_m
@@ -534,7 +540,7 @@ def smooth_recording(
     ds, Ps, xs = np.zeros(eskf.N_STATE), np.empty((eskf.N_STATE, eskf.N_STATE)), np.empty(16)
     starts = [c[0] for c in nav.checkpoints] + [n]
     for i in range(len(nav.checkpoints) - 1, -1, -1):
-        a, x0, P0_, _, done = nav.checkpoints[i]
+        a, x0, P0_, _, done, counters0 = nav.checkpoints[i]
         end = starts[i + 1]
         is_last = end == n
         stop = end if is_last else end + 1  # one sample of overlap: the next segment's first
@@ -544,7 +550,8 @@ def smooth_recording(
             if k < a:  # due after the previous segment's last sample, applied after this checkpoint
                 height_update(x, P, -1, z, level_r, work)
         inputs = (acc, gyr, gyr_var, dt, stance, ratio)
-        store_span(x, P, a, stop, inputs, nav._par, level_updates, level_at, level_r, (xf, Pf, xp, Pp, fn, Rm), work)
+        buffers = (xf, Pf, xp, Pp, fn, Rm)
+        store_span(x, P, a, stop, inputs, nav._par, level_updates, level_at, level_r, buffers, work, counters0.copy())
         if is_last:
             ds[:] = 0.0
             Ps[:] = Pf[m - 1]

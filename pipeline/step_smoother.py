@@ -97,7 +97,7 @@ class StepSmoothingNavigator(Navigator):
         self.close_after = max(1, round(close_after_s * rate_hz))
         self.max_window = max(self.close_after + 1, round(max_window_s * rate_hz))
         self._stance_run = 0  # consecutive stance samples up to the last one navigated
-        self._checkpoint: tuple[F64, F64, int] | None = None  # x, P, level updates applied
+        self._checkpoint: tuple[F64, F64, int, NDArray[np.int64]] | None = None  # x, P, level updates, counters
         self._window_start = 0  # index of the open window's first sample (0: first after alignment)
         self._pieces: list[tuple[int, tuple[NDArray[np.generic], ...]]] = []  # (first index, inputs)
         self._work = np.empty((2, eskf.N_STATE))
@@ -125,7 +125,7 @@ class StepSmoothingNavigator(Navigator):
         if not self.smoothing:
             return super()._run(batch, stat, threshold, still)
         if self._checkpoint is None:
-            self._checkpoint = (self._x.copy(), self._P.copy(), 0)
+            self._checkpoint = (self._x.copy(), self._P.copy(), 0, self._counters.copy())
         first = self.stats.samples_out
         out = super()._run(batch, stat, threshold, still)
         assert self._filter_inputs is not None
@@ -174,13 +174,13 @@ class StepSmoothingNavigator(Navigator):
         """Smooth the open window up to sample ``b`` and open the next one after it."""
         assert self._checkpoint is not None
         a = self._window_start
-        x0, P0, applied = self._checkpoint
+        x0, P0, applied, counters0 = self._checkpoint
         window, rest = _split(self._pieces, a, b)
         self._pieces = rest
         acc, gyr, gyr_var, dt, ratio, t, floor = (cast(F64, window[i]) for i in (0, 1, 2, 3, 5, 6, 7))
         still = cast(NDArray[np.bool_], window[4])
         m = b - a + 1
-        x, P = x0.copy(), P0.copy()
+        x, P, counters = x0.copy(), P0.copy(), counters0.copy()
         level_r = self.levels.params.sigma_m**2
         updates = self.level_updates or []
         for k, z in updates[applied:]:
@@ -189,10 +189,10 @@ class StepSmoothingNavigator(Navigator):
         local = [(k - a, z) for k, z in updates[applied:] if a <= k <= b]
         buffers = _buffers(m)
         inputs = (acc, gyr, gyr_var, dt, still, ratio)
-        store_span(x, P, 0, m, inputs, self._par, local, [k for k, _ in local], level_r, buffers, self._work)
+        store_span(x, P, 0, m, inputs, self._par, local, [k for k, _ in local], level_r, buffers, self._work, counters)
         while applied < len(updates) and updates[applied][0] <= b:  # in order of their samples
             applied += 1
-        self._checkpoint = (x, P, applied)
+        self._checkpoint = (x, P, applied, counters)
         self._window_start = b + 1
         self.closes.append(b)
         xf, Pf, xp, Pp, fn, Rm = buffers
@@ -235,7 +235,8 @@ def _load_kernels() -> None:
     buffers = _buffers(m)
     dt, still, ratio = np.full(m, 0.001), np.ones(m, dtype=np.bool_), np.zeros(m)
     inputs = (acc, gyr, np.zeros((m, 3)), dt, still, ratio)
-    store_span(x, P, 0, m, inputs, par, [], [], 1e-4, buffers, np.empty((2, eskf.N_STATE)))
+    counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+    store_span(x, P, 0, m, inputs, par, [], [], 1e-4, buffers, np.empty((2, eskf.N_STATE)), counters)
     xf, Pf, xp, Pp, fn, Rm = buffers
     out = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 4))
     ds, Ps, xs = np.zeros(eskf.N_STATE), Pf[-1].copy(), xf[-1].copy()

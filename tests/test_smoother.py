@@ -105,7 +105,9 @@ def test_storing_pass_reproduces_the_causal_filter(walk) -> None:  # type: ignor
     assert counters[eskf.CNT_BAD_SAMPLE] == 5 and counters[eskf.CNT_BAD_DT] == 1 and counters[eskf.CNT_GAP] == 1
     assert 50 < np.count_nonzero(var.any(axis=1)) < n // 10
     xf, Pf, _, _, fn, _ = bufs = _buffers(n)
-    _storing_pass(x2, P2, acc, gyr, var, dt, stance, ratio, par, *bufs)
+    counters2 = np.zeros(eskf.N_CNT, dtype=np.int64)
+    _storing_pass(x2, P2, acc, gyr, var, dt, stance, ratio, par, *bufs, counters2)
+    np.testing.assert_array_equal(counters2, counters)
     np.testing.assert_array_equal(xf[:, :3], out[0])
     np.testing.assert_array_equal(xf[:, 3:6], out[1])
     np.testing.assert_array_equal(xf[:, 6:10], out[2])
@@ -129,7 +131,7 @@ def test_backward_pass_matches_a_dense_rts_smoother(walk) -> None:  # type: igno
     )
     xf, Pf, xp, Pp, fn, Rm = bufs = _buffers(n)
     sl = slice(a, a + n)
-    _storing_pass(x, P, acc[sl], gyr[sl], NO_CLIPPED_RATES, dt[sl], stance[sl], ratio[sl], par, *bufs)
+    _storing_pass(x, P, acc[sl], gyr[sl], NO_CLIPPED_RATES, dt[sl], stance[sl], ratio[sl], par, *bufs, counters)
     assert stance[sl].any() and not stance[sl].all()
     ds, Ps, xs = np.zeros(15), Pf[-1].copy(), xf[-1].copy()
     out = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
