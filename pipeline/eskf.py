@@ -116,7 +116,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s, quat_to_mat_into
+from pipeline.quaternion import quat_from_rotvec_s, quat_mul_s, quat_to_mat_into, vertical_in_body_s
 from pipeline.samples import diff_after
 
 F64 = NDArray[np.float64]
@@ -604,8 +604,7 @@ def _correct(
         s2 = par[PAR_STANDING_TURN] ** 2
         if s2 > 0.0 and counters[FLAG_STARTED] == 1 and counters[STATE_STANCE_RUN] > par[PAR_STANDING_AFTER]:
             # a standing foot: R = r I + σ² u uᵀ, u the navigation frame's vertical in body axes
-            qw, qx, qy, qz = x[6], x[7], x[8], x[9]
-            u0, u1, u2 = 2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx), qw * qw - qx * qx - qy * qy + qz * qz
+            u0, u1, u2 = vertical_in_body_s(x[6], x[7], x[8], x[9])
             _update3_sym(
                 x, P, BG0, y, r_zaru + s2 * u0 * u0, s2 * u0 * u1, s2 * u0 * u2,
                 r_zaru + s2 * u1 * u1, s2 * u1 * u2, r_zaru + s2 * u2 * u2, work,

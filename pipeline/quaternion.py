@@ -42,6 +42,12 @@ def quat_from_rotvec_s(rx: float, ry: float, rz: float) -> tuple[float, float, f
 
 
 @njit(cache=True, inline="always")
+def vertical_in_body_s(w: float, x: float, y: float, z: float) -> tuple[float, float, float]:  # pragma: no cover
+    """The navigation frame's vertical in body axes: the last row of ``quat_to_mat`` of (w, x, y, z)."""
+    return 2.0 * (x * z - w * y), 2.0 * (y * z + w * x), w * w - x * x - y * y + z * z
+
+
+@njit(cache=True, inline="always")
 def quat_to_mat_into(w: float, x: float, y: float, z: float, m: F64) -> None:  # pragma: no cover - compiled
     """Write the rotation matrix of the unit quaternion (w, x, y, z) into ``m`` (3, 3); see ``quat_to_mat``."""
     m[0, 0] = w * w + x * x - y * y - z * z
@@ -50,9 +56,7 @@ def quat_to_mat_into(w: float, x: float, y: float, z: float, m: F64) -> None:  #
     m[1, 0] = 2.0 * (x * y + w * z)
     m[1, 1] = w * w - x * x + y * y - z * z
     m[1, 2] = 2.0 * (y * z - w * x)
-    m[2, 0] = 2.0 * (x * z - w * y)
-    m[2, 1] = 2.0 * (y * z + w * x)
-    m[2, 2] = w * w - x * x - y * y + z * z
+    m[2, 0], m[2, 1], m[2, 2] = vertical_in_body_s(w, x, y, z)
 
 
 @njit(cache=True)

@@ -40,6 +40,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from pipeline.eskf import TH0, update1
+from pipeline.quaternion import vertical_in_body_s
 
 F64 = NDArray[np.float64]
 
@@ -65,9 +66,7 @@ def height_row(x: F64, lever_b_m: F64, dir_b: F64, range_m: float, H: F64) -> tu
     r10 = 2.0 * (qx * qy + qw * qz)
     r11 = qw * qw - qx * qx + qy * qy - qz * qz
     r12 = 2.0 * (qy * qz - qw * qx)
-    r20 = 2.0 * (qx * qz - qw * qy)
-    r21 = 2.0 * (qy * qz + qw * qx)
-    r22 = qw * qw - qx * qx - qy * qy + qz * qz
+    r20, r21, r22 = vertical_in_body_s(qw, qx, qy, qz)
     v0 = lever_b_m[0] + range_m * dir_b[0]
     v1 = lever_b_m[1] + range_m * dir_b[1]
     v2 = lever_b_m[2] + range_m * dir_b[2]
