@@ -96,7 +96,6 @@ class StepSmoothingNavigator(Navigator):
         self.level_updates = []
         self.close_after = max(1, round(close_after_s * rate_hz))
         self.max_window = max(self.close_after + 1, round(max_window_s * rate_hz))
-        self._stance_run = 0  # consecutive stance samples up to the last one navigated
         self._checkpoint: tuple[F64, F64, int, NDArray[np.int64]] | None = None  # x, P, level updates, counters
         self._window_start = 0  # index of the open window's first sample (0: first after alignment)
         self._pieces: list[tuple[int, tuple[NDArray[np.generic], ...]]] = []  # (first index, inputs)
@@ -127,24 +126,24 @@ class StepSmoothingNavigator(Navigator):
         if self._checkpoint is None:
             self._checkpoint = (self._x.copy(), self._P.copy(), 0, self._counters.copy())
         first = self.stats.samples_out
+        run0 = int(self._counters[eskf.STATE_STANCE_RUN])  # stance samples in a row before this batch
         out = super()._run(batch, stat, threshold, still)
         assert self._filter_inputs is not None
         self._pieces.append((first, (*self._filter_inputs, batch.t_s, out.pos_n_m[:, 2] - out.clearance_m)))
-        closes = self._closes(first, still)
+        closes = self._closes(first, still, run0)
         if not closes:
             return out
         return dataclasses.replace(out, smoothed=SmoothedSpan.concat([self._close(b) for b in closes]))
 
-    def _closes(self, first: int, still: NDArray[np.bool_]) -> list[int]:
-        """Indices of the samples after which windows close in a batch starting at sample ``first``."""
-        n, run0, close_after = still.shape[0], self._stance_run, self.close_after
+    def _closes(self, first: int, still: NDArray[np.bool_], run0: int) -> list[int]:
+        """Indices of the samples after which windows close in a batch starting at sample ``first``,
+        after ``run0`` stance samples in a row."""
+        n, close_after = still.shape[0], self.close_after
         candidates: list[int] = []
         if still.all():  # most live batches are all stance or all swing: no arrays needed
-            self._stance_run = run0 + n
             if run0 < close_after <= run0 + n:
                 candidates = [first + close_after - run0 - 1]
         elif not still.any():
-            self._stance_run = 0
             if 0 < run0 < close_after:  # a short stance ended with the previous batch
                 candidates = [first - 1]
         else:
@@ -152,7 +151,6 @@ class StepSmoothingNavigator(Navigator):
             last_swing = np.maximum.accumulate(np.where(still, -1, k))
             run = np.where(still, k - last_swing + np.where(last_swing < 0, run0, 0), 0)
             previous = np.concatenate([[run0], run[:-1]])
-            self._stance_run = int(run[-1])
             at = np.flatnonzero(run == close_after)  # the stance has lasted close_after samples
             ended = np.flatnonzero(~still & (previous > 0) & (previous < close_after)) - 1  # a short one ended
             candidates = sorted(int(c) + first for c in np.concatenate([at, ended]))
