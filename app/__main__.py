@@ -1,7 +1,7 @@
-"""``python -m app`` runs the ``footnav`` command line."""
+"""``python -m footnav.app`` runs the ``footnav`` command line."""
 
 import sys
 
-from app.cli import main
+from footnav.app.cli import main
 
 sys.exit(main())

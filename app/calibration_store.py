@@ -28,11 +28,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
-from device.capture import footnav_version
-from pipeline.calibration import CalibrationError, ImuCalibration
+from footnav.device.files.capture import footnav_version
+from footnav.pipeline.calibration.model import CalibrationError, ImuCalibration
 
 if TYPE_CHECKING:
-    from app.config import Config
+    from footnav.app.config import Config
 
 ENV_DIR: Final = "FOOTNAV_CALIBRATION_DIR"
 FORMAT: Final = "footnav-calibration"

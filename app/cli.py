@@ -10,10 +10,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from pipeline.errors import FootnavError
+from footnav.pipeline.errors import FootnavError
 
 if TYPE_CHECKING:
-    from app.config import Config
+    from footnav.app.config import Config
 
 
 def _positive(text: str) -> float:
@@ -37,7 +37,7 @@ def _seconds(text: str) -> float:
 
 
 def _add_stance_arg(p: argparse.ArgumentParser, *, default: str | None) -> None:
-    """``--stance``: the zero-velocity detector of ToF units (``pipeline.height_detector``)."""
+    """``--stance``: the zero-velocity detector of ToF units (``footnav.pipeline.stance.height_detector``)."""
     p.add_argument(
         "--stance",
         choices=("inertial", "height", "and", "or"),
@@ -48,7 +48,7 @@ def _add_stance_arg(p: argparse.ArgumentParser, *, default: str | None) -> None:
 
 
 def _add_config_args(p: argparse.ArgumentParser, *, profile: bool = True) -> None:
-    from pipeline.profiles import PROFILES
+    from footnav.pipeline.navigation.profiles import PROFILES
 
     p.add_argument(
         "--config", type=Path, metavar="FILE", help="configuration file (default: ./footnav.toml if present)"
@@ -84,19 +84,15 @@ def _lever(values: list[float] | None) -> tuple[float, float, float] | None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from app.demo import PATHS
-    from device.emulator.imu_errors import AXIS_ERRORS, IMU_GRADES
+    from footnav.app.commands.demo import PATHS
+    from footnav.device.emulator.sensors.imu_errors import AXIS_ERRORS, IMU_GRADES
 
-    parser = argparse.ArgumentParser(
-        prog="footnav", description="Foot-mounted inertial navigation, live in Rerun."
-    )
+    parser = argparse.ArgumentParser(prog="footnav", description="Foot-mounted inertial navigation, live in Rerun.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug detail to stderr")
     sub = parser.add_subparsers(dest="command", required=True)
 
     demo = sub.add_parser("demo", help="run everything against the built-in emulated shoe (no hardware)")
-    demo.add_argument(
-        "--path", choices=PATHS, default="rectangle", help="walking path (default: rectangle, 18 × 9 m)"
-    )
+    demo.add_argument("--path", choices=PATHS, default="rectangle", help="walking path (default: rectangle, 18 × 9 m)")
     demo.add_argument(
         "--duration", type=_positive, default=60.0, metavar="S", help="walk duration in seconds (default 60)"
     )
@@ -121,12 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_config_args(demo)
     _add_step_smoothing_arg(demo)
     _add_stance_arg(demo, default="inertial")
-    demo.add_argument(
-        "--feet", type=int, choices=(1, 2), default=1, help="emulated shoes: 1, or 2 (left and right)"
-    )
-    demo.add_argument(
-        "--pace", type=_pace, default=1.0, metavar="1x|Nx|max", help="emulator speed (default real time)"
-    )
+    demo.add_argument("--feet", type=int, choices=(1, 2), default=1, help="emulated shoes: 1, or 2 (left and right)")
+    demo.add_argument("--pace", type=_pace, default=1.0, metavar="1x|Nx|max", help="emulator speed (default real time)")
     demo.add_argument("--seed", type=int, default=1, help="random seed of the emulated sensor errors")
     demo.add_argument(
         "--miscalibrated",
@@ -162,9 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="emulate the multi-sensor unit: three ToF range sensors and a barometer, fused for foot clearance",
     )
 
-    live = sub.add_parser(
-        "live", help="navigate one connected unit, or two (--left/--right), over USB serial or BLE"
-    )
+    live = sub.add_parser("live", help="navigate one connected unit, or two (--left/--right), over USB serial or BLE")
     live.add_argument("--port", help="serial port of the unit, e.g. /dev/ttyACM0 (or ble:NAME)")
     live.add_argument(
         "--ble",
@@ -247,21 +237,13 @@ def build_parser() -> argparse.ArgumentParser:
     _add_config_args(cal, profile=False)
 
     scan = sub.add_parser("scan", help="list serial ports and BLE devices that look like shoe units")
-    scan.add_argument(
-        "--timeout", type=_positive, default=5.0, metavar="S", help="how long to scan BLE (default 5 s)"
-    )
+    scan.add_argument("--timeout", type=_positive, default=5.0, metavar="S", help="how long to scan BLE (default 5 s)")
 
     replay = sub.add_parser("replay", help="replay a footnav capture (.mcap) through the same pipeline")
     replay.add_argument("file", type=Path, metavar="FILE", help="a capture written by footnav live/demo")
-    replay.add_argument(
-        "--speed", type=_pace, default=math.inf, metavar="1x|Nx|max", help="replay pace (default max)"
-    )
-    replay.add_argument(
-        "--start", type=_seconds, default=0.0, metavar="S", help="start S seconds into the capture"
-    )
-    replay.add_argument(
-        "--end", type=_seconds, default=math.inf, metavar="S", help="stop S seconds into the capture"
-    )
+    replay.add_argument("--speed", type=_pace, default=math.inf, metavar="1x|Nx|max", help="replay pace (default max)")
+    replay.add_argument("--start", type=_seconds, default=0.0, metavar="S", help="start S seconds into the capture")
+    replay.add_argument("--end", type=_seconds, default=math.inf, metavar="S", help="stop S seconds into the capture")
     replay.add_argument(
         "--without-tof",
         action="store_true",
@@ -276,9 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument(
         "input", type=Path, metavar="INPUT", help="a PyShoe .mat, x-io CSV, OpenShoe log, CSV, or a footnav capture"
     )
-    export.add_argument(
-        "-o", "--output", type=Path, required=True, metavar="TRACK.csv", help="where to write"
-    )
+    export.add_argument("-o", "--output", type=Path, required=True, metavar="TRACK.csv", help="where to write")
     export.add_argument(
         "--steps",
         type=Path,
@@ -289,13 +269,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_recording_args(export)
 
     evaluate = sub.add_parser("evaluate", help="accuracy on recordings with ground truth or a closed loop")
-    evaluate.add_argument(
-        "paths", type=Path, nargs="+", metavar="PATH", help="recordings, or folders of them"
-    )
+    evaluate.add_argument("paths", type=Path, nargs="+", metavar="PATH", help="recordings, or folders of them")
     _add_smooth_arg(evaluate)
     _add_levels_arg(evaluate)
 
-    from app.experiments import add_experiment_parsers
+    from footnav.app.experiments import add_experiment_parsers
 
     add_experiment_parsers(sub)
 
@@ -308,20 +286,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_recording_args(parser: argparse.ArgumentParser) -> None:
-    from pipeline.loaders import LOADERS
-    from pipeline.profiles import PROFILES
+    from footnav.device.files.recordings import LOADERS
+    from footnav.pipeline.navigation.profiles import PROFILES
 
-    parser.add_argument(
-        "--format", choices=sorted(LOADERS), help="recording format (default: detected from the file)"
-    )
+    parser.add_argument("--format", choices=sorted(LOADERS), help="recording format (default: detected from the file)")
     parser.add_argument(
         "--columns",
         metavar="SPEC",
         help="for a generic CSV: time=COL[:s|ms|us|ns],acc=X;Y;Z[:m/s2|g|mg],gyr=X;Y;Z[:rad/s|deg/s],profile=NAME",
     )
-    parser.add_argument(
-        "--profile", choices=sorted(PROFILES), help="unit profile (default: the format's sensor)"
-    )
+    parser.add_argument("--profile", choices=sorted(PROFILES), help="unit profile (default: the format's sensor)")
     _add_smooth_arg(parser)
     _add_levels_arg(parser)
 
@@ -353,7 +327,7 @@ def _add_levels_arg(parser: argparse.ArgumentParser) -> None:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from app.export import run_export
+    from footnav.app.commands.export import run_export
 
     print(
         run_export(
@@ -371,7 +345,7 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from app.evaluate import format_table, run_evaluate
+    from footnav.app.commands.evaluate import format_table, run_evaluate
 
     rows, problems = run_evaluate(args.paths, smooth=args.smooth, stance_levels=args.stance_levels)
     print(format_table(rows))
@@ -382,7 +356,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 def _config(args: argparse.Namespace) -> Config:
     """Defaults < the configuration file < the command line."""
-    from app.config import CLI, load_config
+    from footnav.app.config import CLI, load_config
 
     cfg = load_config(args.config)
     cfg.set("unit.profile", getattr(args, "profile", None), CLI)
@@ -396,8 +370,8 @@ def _config(args: argparse.Namespace) -> Config:
 
 
 def _live(args: argparse.Namespace, argv: list[str]) -> int:
-    from app.live import LiveOptions, run_live
-    from pipeline.dual_navigator import DEFAULT_LEVER_B_M
+    from footnav.app.commands.live import LiveOptions, run_live
+    from footnav.pipeline.dual_imu.navigator import DEFAULT_LEVER_B_M
 
     one = [name for name, value in (("--port", args.port), ("--ble", args.ble)) if value is not None]
     if len(one) > 1 or (one and (args.left or args.right)):
@@ -433,8 +407,8 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
 
 
 def _calibrate(args: argparse.Namespace) -> int:
-    from app.calibrate import CalibrateOptions, run_calibrate
-    from app.session import UnitAddress
+    from footnav.app.commands.calibrate import CalibrateOptions, run_calibrate
+    from footnav.app.session import UnitAddress
 
     cfg = _config(args)
     address = None
@@ -462,7 +436,7 @@ def _scan(args: argparse.Namespace) -> int:
     """Serial ports and BLE units that look like shoe units; without Bluetooth, one line says so."""
     import asyncio
 
-    from device.discovery import scan
+    from footnav.device.discovery import scan
 
     report = asyncio.run(scan(args.timeout))
     for line in report.lines():
@@ -471,7 +445,7 @@ def _scan(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from app.replay import ReplayOptions, run_replay
+    from footnav.app.commands.replay import ReplayOptions, run_replay
 
     if args.end <= args.start:
         raise FootnavError(f"--end ({args.end:g} s) must come after --start ({args.start:g} s)")
@@ -503,7 +477,7 @@ def _show_config(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from app.demo import DemoOptions, run_demo
+    from footnav.app.commands.demo import DemoOptions, run_demo
 
     cfg = _config(args)
     return run_demo(
@@ -532,7 +506,7 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _experiment(args: argparse.Namespace) -> int:
-    from app.experiments import run_experiment
+    from footnav.app.experiments import run_experiment
 
     return run_experiment(args)
 
@@ -541,11 +515,9 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``footnav`` console script."""
     argv = sys.argv[1:] if argv is None else argv
     args = build_parser().parse_args(argv)
-    logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.WARNING, format="footnav: %(message)s"
-    )
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="footnav: %(message)s")
     if not args.verbose:  # sessions report link events themselves (terminal, recording, capture)
-        logging.getLogger("device.links").setLevel(logging.ERROR)
+        logging.getLogger("footnav.device.links.reconnecting").setLevel(logging.ERROR)
     commands: dict[str, Callable[[argparse.Namespace], int]] = {
         "demo": _demo,
         "live": lambda a: _live(a, argv),

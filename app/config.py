@@ -12,15 +12,15 @@ The file (TOML, read with :mod:`tomllib`)::
     profile = "mpu6500x4"       # a built-in profile or one of [profiles.NAME]
     rate_divider = 0            # output every 2**K samples of the 1 kHz base rate
 
-    [filter]                    # pipeline.navigator.NavConfig (SI units, radians)
+    [filter]                    # footnav.pipeline.navigation.navigator.NavConfig (SI units, radians)
     align_s = 0.5
     init_yaw_sigma_rad = 0.0002
 
-    [detector]                  # pipeline.detectors: the dataclass of NavConfig.detector
+    [detector]                  # footnav.pipeline.stance.detectors: the dataclass of NavConfig.detector
     threshold = 25.0
     window_s = 0.01
 
-    [tof]                       # the ToF sensors' mounting and noise (pipeline.tof_aiding.TofConfig)
+    [tof]                       # the ToF sensors' mounting and noise (footnav.pipeline.aiding.tof.TofConfig)
     lever_b_m = [[0.12, 0.0, 0.03], [0.0, -0.045, 0.03], [-0.10, 0.0, 0.04]]  # from the IMU, m
     dir_b = [[0.17, 0.0, -1.0], [0.0, 0.0, -1.0], [-0.17, 0.0, -1.0]]         # viewing directions
     sigma_range_m = 0.01
@@ -30,7 +30,8 @@ The file (TOML, read with :mod:`tomllib`)::
                                 # $XDG_CONFIG_HOME/footnav/calibration, else ~/.config/footnav/calibration)
     apply = true                # apply a unit's calibration file when it connects or its capture replays
 
-    [profiles.myshoe]           # a unit profile: a built-in base plus pipeline.profiles.UnitProfile fields
+    [profiles.myshoe]           # a unit profile: a built-in base plus
+    footnav.pipeline.navigation.profiles.UnitProfile fields
     base = "mpu6500x4"
     gyr_bias_init_radps = 0.003
 
@@ -51,12 +52,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, cast
 
-from device.capture import FLUSH_PERIOD_S
-from pipeline.errors import FootnavError
-from pipeline.height_detector import HEIGHT_MODES, HeightDetectorParams, HeightMode
-from pipeline.navigator import NavConfig
-from pipeline.profiles import PROFILES, UnitProfile
-from pipeline.tof_aiding import TofConfig
+from footnav.device.files.capture import FLUSH_PERIOD_S
+from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.errors import FootnavError
+from footnav.pipeline.navigation.navigator import NavConfig
+from footnav.pipeline.navigation.profiles import PROFILES, UnitProfile
+from footnav.pipeline.stance.height_detector import HEIGHT_MODES, HeightDetectorParams, HeightMode
 
 DEFAULT_FILE = "footnav.toml"
 DEFAULT_SESSIONS_DIR = "sessions"
@@ -73,7 +74,7 @@ _UNIT_DEFAULTS: dict[str, Any] = {"profile": "mpu6500x4", "rate_divider": 0}
 _CALIBRATION_DEFAULTS: dict[str, Any] = {"dir": "", "apply": True}
 _FILTER_FIELDS = {f.name: f for f in dataclasses.fields(NavConfig) if f.name not in ("profile", "detector")}
 _DETECTOR_CLS = type(NavConfig().detector)
-"""The detector settings dataclass of ``NavConfig.detector`` (pipeline.detectors)."""
+"""The detector settings dataclass of ``NavConfig.detector`` (footnav.pipeline.stance.detectors)."""
 _DETECTOR_FIELDS = {f.name: f for f in dataclasses.fields(_DETECTOR_CLS)}
 _PROFILE_FIELDS = {f.name: f for f in dataclasses.fields(UnitProfile) if f.name != "name"}
 _TOF_KEYS = ("lever_b_m", "dir_b", "sigma_range_m", "sigma_floor_m")
@@ -128,7 +129,7 @@ class Config:
         return _DETECTOR_CLS(**{k: self[f"detector.{k}"] for k in _DETECTOR_FIELDS})
 
     def nav_config(self) -> NavConfig:
-        """The navigator settings (``pipeline.navigator.NavConfig``) this configuration describes."""
+        """The navigator settings (``footnav.pipeline.navigation.navigator.NavConfig``) this configuration describes."""
         return NavConfig(
             profile=self.profile(),
             detector=self.detector(),
@@ -137,7 +138,7 @@ class Config:
 
     def tof_config(self, stance: str = "inertial") -> TofConfig:
         """The ToF aiding settings: the [tof] section, with the stance detector mode ``stance``
-        (inertial, height, and, or; ``pipeline.height_detector``)."""
+        (inertial, height, and, or; ``footnav.pipeline.stance.height_detector``)."""
         if stance not in HEIGHT_MODES:
             raise ConfigError(f"unknown stance detector {stance!r}; expected one of {', '.join(HEIGHT_MODES)}")
         levers, dirs = self["tof.lever_b_m"], self["tof.dir_b"]

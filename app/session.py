@@ -1,9 +1,11 @@
 """Session assembly: a unit (serial port, BLE, or capture replay) -> the pipeline -> sinks, clean shutdown.
 
-Live units are opened through :class:`device.links.ReconnectingLink`: an unplugged serial unit or a
+Live units are opened through :class:`footnav.device.links.reconnecting.ReconnectingLink`: an unplugged serial unit or a
 dropped BLE connection is reconnected with backoff and its stream resumed while the session, its
-capture and its outputs go on; each interruption is a :class:`device.links.LinkEvent` for the caller
-(``on_link_event``) and is counted in the link's :class:`device.links.LinkHealth`. A port that does not
+capture and its outputs go on; each interruption is a :class:`footnav.device.links.reconnecting.LinkEvent` for the
+caller
+(``on_link_event``) and is counted in the link's :class:`footnav.device.links.reconnecting.LinkHealth`. A port that
+does not
 exist or is busy when the session starts is still an error at once (no retrying a typo).
 """
 
@@ -18,24 +20,23 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal, cast
 
 import numpy as np
-
-from app.status import FootStatus, StatusLine
-from device import links
-from device.extensions import BaroBatch, TofBatch
-from device.links import LinkEvent, ReconnectingLink
-from device.raw_imu import RawImuBatch
-from device.unit import CaptureTap, LinkStats, Mode, OpenShoeUnit, RawImuMode
-from pipeline.baro import PressureBatch
-from pipeline.calibration import CalibrationError, ImuCalibration
-from pipeline.errors import DeviceError
-from pipeline.nav_types import NavBatch
-from pipeline.runner import BatchNavigator, NavSink, SourceItem, run_pipeline
-from pipeline.samples import ImuBatch
-from pipeline.tof_aiding import RangeBatch
+from footnav.app.status import FootStatus, StatusLine
+from footnav.device.errors import DeviceError
+from footnav.device.links import reconnecting as links
+from footnav.device.links.reconnecting import LinkEvent, ReconnectingLink
+from footnav.device.protocol.extensions import BaroBatch, TofBatch
+from footnav.device.protocol.raw_imu import RawImuBatch
+from footnav.device.unit import CaptureTap, LinkStats, Mode, OpenShoeUnit, RawImuMode
+from footnav.pipeline.aiding.baro import PressureBatch
+from footnav.pipeline.aiding.tof import RangeBatch
+from footnav.pipeline.calibration.model import CalibrationError, ImuCalibration
+from footnav.pipeline.nav_types import NavBatch
+from footnav.pipeline.runner import BatchNavigator, NavSink, SourceItem, run_pipeline
+from footnav.pipeline.samples import ImuBatch
 
 if TYPE_CHECKING:
-    from app.calibration_store import StoredCalibration
-    from device.ble_link import BleBackend
+    from footnav.app.calibration_store import StoredCalibration
+    from footnav.device.links.ble import BleBackend
 
 log = logging.getLogger(__name__)
 
@@ -366,13 +367,14 @@ async def run_device_session(
     mode: Mode | None = None,
     extensions: bool = False,
 ) -> SerialSessionResult:
-    """Open the unit at ``address`` through a :class:`~device.links.ReconnectingLink`, start its IMU
+    """Open the unit at ``address`` through a :class:`~footnav.device.links.reconnecting.ReconnectingLink`, start
+    its IMU
     stream, navigate until the stream ends or the task is cancelled (Ctrl-C), then stop the unit and
     close the link whatever happened.
 
     An unplugged unit or a dropped BLE connection is reconnected with backoff and its stream resumed
     (the learned start command is sent again); the session waits meanwhile and carries on. Every
-    :class:`~device.links.LinkEvent` goes to ``on_link_event``; the counts are in
+    :class:`~footnav.device.links.reconnecting.LinkEvent` goes to ``on_link_event``; the counts are in
     ``result.link_health``, and the status line shows the reconnects.
 
     ``result`` (optional) is filled in as the session goes, so an interrupted session still has one.

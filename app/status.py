@@ -8,9 +8,8 @@ from collections.abc import Callable, Sequence
 from typing import TextIO
 
 import numpy as np
-
-from pipeline.nav_types import NavBatch
-from pipeline.navigator import NavStats
+from footnav.pipeline.nav_types import NavBatch
+from footnav.pipeline.navigation.navigator import NavStats
 
 RATE_WINDOW_S = 2.0
 """The sample rate shown is averaged over about this much wall time."""

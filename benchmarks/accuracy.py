@@ -5,17 +5,17 @@ step once it has ended) and RTS-smoothed, in one command.
         [--axis-errors none|gyro-bias-calibrated]
 
 Real recordings (``../shared/data``, see its DATA.md): the PyShoe VICON trials (ARMSE-2D as the
-PyShoe authors compute it, ``pipeline.metrics.armse_2d_pyshoe``, and ATE-3D after a yaw +
+PyShoe authors compute it, ``footnav.pipeline.metrics.armse_2d_pyshoe``, and ATE-3D after a yaw +
 translation fit), the x-io and OpenShoe closed loops (loop closure 3D and 2D). Emulated walks
-(``device.emulator``, MPU-6500-class errors, the seeds of ``tests/test_accuracy.py``; ``--axis-errors``
-adds scale-factor and cross-axis errors, ``device.emulator.imu_errors.AXIS_ERRORS``): end-point error
+(``footnav.device.emulator``, MPU-6500-class errors, the seeds of ``tests/test_accuracy.py``; ``--axis-errors``
+adds scale-factor and cross-axis errors, ``footnav.device.emulator.sensors.imu_errors.AXIS_ERRORS``): end-point error
 as % of distance for the rectangle, figure-eight and stairs, and the filter's consistency, the mean
 NEES of the 3D position (error ᵀ P⁻¹ error over all samples; for a consistent filter its mean is 3,
 Bar-Shalom, Li, Kirubarajan, "Estimation with Applications to Tracking and Navigation", 2001,
 §5.4.2, and the 95 % band of a time average over N independent samples is χ²₃ₙ/N; samples of one
 walk are strongly correlated, so the band is only indicative).
 
-One default configuration for every file (``app.export.navigate_recording``); nothing is tuned to
+One default configuration for every file (``footnav.app.commands.export.navigate_recording``); nothing is tuned to
 a file. The ground truth is used only to measure.
 """
 
@@ -27,12 +27,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-from app.evaluate import evaluate_file, find_recordings
-from device.emulator.gait import simulate_walk
-from device.emulator.imu_errors import AXIS_ERRORS, corrupt
-from pipeline.navigator import NavConfig, navigate
-from pipeline.profiles import get_profile
+from footnav.app.commands.evaluate import evaluate_file, find_recordings
+from footnav.device.emulator.motion.gait import simulate_walk
+from footnav.device.emulator.sensors.imu_errors import AXIS_ERRORS, corrupt
+from footnav.pipeline.navigation.navigator import NavConfig, navigate
+from footnav.pipeline.navigation.profiles import get_profile
 
 DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 EMULATED = (("rectangle", 240.0, 7), ("figure8", 240.0, 7), ("stairs", 60.0, 1))
@@ -40,7 +39,7 @@ EMULATED = (("rectangle", 240.0, 7), ("figure8", 240.0, 7), ("stairs", 60.0, 1))
 
 def real_rows(data: Path, smooth: str | None) -> list[tuple[str, str, float, float, float, float]]:
     """(name, format, ARMSE-2D, ATE-3D, loop 3D, loop 2D) per recording (NaN where not applicable),
-    causal (``smooth`` None) or smoothed (``app.export.SMOOTHING``)."""
+    causal (``smooth`` None) or smoothed (``footnav.app.commands.export.SMOOTHING``)."""
     rows = []
     for f in find_recordings([data]):
         e = evaluate_file(f, smooth)

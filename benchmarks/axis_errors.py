@@ -3,7 +3,7 @@
     .venv/bin/python -m benchmarks.axis_errors [--path rectangle] [--duration 60] [--size 0.01]
 
 The emulated walk's error-free signals are given one error at a time (a gyroscope or accelerometer
-scale factor or cross-axis sensitivity of ``--size``, ``device.emulator.imu_errors``, body axes x
+scale factor or cross-axis sensitivity of ``--size``, ``footnav.device.emulator.sensors.imu_errors``, body axes x
 forward, y left, z up) and navigated with the default configuration. Printed per error: the final
 height error and the median height change of the error over a swing (stance end to stance start,
 the emulator's true stance) and over a stance. The real loops' signature (README "Accuracy": the
@@ -17,10 +17,9 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-
-from device.emulator.gait import GaitTruth, simulate_walk
-from pipeline.navigator import NavConfig, navigate
-from pipeline.profiles import get_profile
+from footnav.device.emulator.motion.gait import GaitTruth, simulate_walk
+from footnav.pipeline.navigation.navigator import NavConfig, navigate
+from footnav.pipeline.navigation.profiles import get_profile
 
 F64 = np.ndarray
 

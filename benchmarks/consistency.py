@@ -3,7 +3,7 @@
     .venv/bin/python -m benchmarks.consistency [--runs 16] [--duration 240]
 
 For each walk (rectangle, figure-eight) the same true motion is measured by ``--runs`` emulated
-IMUs with independent errors (``device.emulator.imu_errors``, MPU-6500 grade, seeds 1..M) and
+IMUs with independent errors (``footnav.device.emulator.sensors.imu_errors``, MPU-6500 grade, seeds 1..M) and
 navigated. At every second t the average NEES over the runs,
 
     ANEES(t) = (1/M) Σ_m e_m(t)ᵀ P_m(t)⁻¹ e_m(t),
@@ -16,7 +16,7 @@ the band, for the 3D position, the horizontal pair and the height.
 
 Three models are run on the same records:
 
-- ``default``: the unit profile footnav navigates with (``pipeline.profiles``), which adds process
+- ``default``: the unit profile footnav navigates with (``footnav.pipeline.navigation.profiles``), which adds process
   noise for what real units have and the emulator does not (scale factor, cross-axis, vibration,
   a standing foot's residual rotation);
 - ``emulated``: a profile holding exactly the emulator's error model
@@ -42,14 +42,13 @@ import math
 import time
 
 import numpy as np
+from footnav.device.emulator.motion.gait import GaitTruth, simulate_walk
+from footnav.device.emulator.sensors.imu_errors import AXIS_ERRORS, IMU_GRADES, ImuGrade, corrupt
+from footnav.pipeline.navigation import eskf
+from footnav.pipeline.navigation.alignment import align_from_still
+from footnav.pipeline.navigation.navigator import NO_CLIPPED_RATES, NavConfig, filter_start, navigate
+from footnav.pipeline.navigation.profiles import UnitProfile, get_profile
 from scipy.stats import chi2
-
-from device.emulator.gait import GaitTruth, simulate_walk
-from device.emulator.imu_errors import AXIS_ERRORS, IMU_GRADES, ImuGrade, corrupt
-from pipeline import eskf
-from pipeline.alignment import align_from_still
-from pipeline.navigator import NO_CLIPPED_RATES, NavConfig, filter_start, navigate
-from pipeline.profiles import UnitProfile, get_profile
 
 F64 = np.ndarray
 WALKS = ("rectangle", "figure8")
@@ -65,7 +64,7 @@ def profile_of_grade(grade: ImuGrade, base: UnitProfile) -> UnitProfile:
     """``base`` with the sensor terms replaced by the emulator's error model of ``grade``.
 
     White noise: the emulator's one-sided density d gives σ² = d² · rate / 2 per sample, the profile's
-    density is used as σ² = density² · rate (``pipeline.navigator.filter_parameters``), so d / √2.
+    density is used as σ² = density² · rate (``footnav.pipeline.navigation.navigator.filter_parameters``), so d / √2.
     Drift: a first-order Gauss-Markov bias of stationary σ_bi and correlation time τ is driven by
     σ_bi √(2/τ) per √s, taken as the random walk density (exact for t ≪ τ). Turn-on bias: its σ,
     with the drift's stationary σ added in quadrature (the drift starts from its stationary law).
@@ -131,7 +130,7 @@ def nees_per_second(
     grade: ImuGrade | str = GRADE,
 ) -> dict[str, F64]:
     """(runs, seconds) NEES of each component (``COMPONENTS``), from 1 s after alignment, with the
-    emulated IMU's scale-factor and cross-axis errors ``axes`` (``device.emulator.imu_errors``), through
+    emulated IMU's scale-factor and cross-axis errors ``axes`` (``footnav.device.emulator.sensors.imu_errors``), through
     the navigator (its detector's stances) or, with ``true_stances``, the filter on the walk's own."""
     truth = simulate_walk(path, duration_s, rate_hz=RATE_HZ, seed=0)
     out: dict[str, list[F64]] = {name: [] for name, _ in COMPONENTS}

@@ -4,10 +4,10 @@
 
 1. **live, one foot** and **live, two feet** at 1 kHz in real time, and two feet without any Rerun
    output (the baseline for the logging's share of CPU and latency). The emulated shoes
-   (:class:`device.emulator.pty_server.PtyShoeServer`, the demo's walk and sensor errors) run in a
+   (:class:`footnav.device.emulator.serving.pty.PtyShoeServer`, the demo's walk and sensor errors) run in a
    child process of their own (``_serve``), so their threads take none of the measured CPU; footnav
    runs in another child (``_live``) exactly as ``footnav live --left PTY --right PTY --no-viewer
-   --save FILE.rrd`` does (``app.live.live_session``, capture on, Rerun logging to a file), with one
+   --save FILE.rrd`` does (``footnav.app.commands.live.live_session``, capture on, Rerun logging to a file), with one
    extra sink per foot (``LiveOptions.collect``) appended after the Rerun sink that notes
    ``time.monotonic_ns()`` when each batch has been handed to the logger. The emulator notes the
    same clock (system-wide ``CLOCK_MONOTONIC``) after each ``os.write`` to the pty, and the packets
@@ -22,7 +22,7 @@
    of walk, default 60), then ``footnav replay CAPTURE --speed max --save out.rrd --no-viewer``
    timed by the wall clock, with its CPU time and peak RSS from ``wait4``.
 
-With ``--step-smoothing`` both run with step smoothing (``pipeline.step_smoother``: the live
+With ``--step-smoothing`` both run with step smoothing (``footnav.pipeline.smoothing.stepwise``: the live
 sessions' configuration, and the demo that makes the capture, whose replay then follows it).
 
 Peak RSS is ``ru_maxrss`` of the footnav process (the ``_live`` child, or ``footnav replay``).
@@ -61,8 +61,8 @@ WARMUP_S = 2.0
 def _serve(feet: int, seconds: float, out: Path) -> int:
     """Serve ``feet`` emulated shoes in real time; print their ports; on a line on stdin (or EOF),
     stop and save every write's time and bytes to ``out`` (npz)."""
-    from app.demo import DemoOptions, demo_truth
-    from device.emulator.pty_server import PtyShoeServer
+    from footnav.app.commands.demo import DemoOptions, demo_truth
+    from footnav.device.emulator.serving.pty import PtyShoeServer
 
     class TimedPtyServer(PtyShoeServer):
         """Notes ``time.monotonic_ns()`` after each write to the pty, and the bytes written so far."""
@@ -97,7 +97,7 @@ def _serve(feet: int, seconds: float, out: Path) -> int:
 
 def packet_send_ns(write_ns: NDArray[np.int64], write_end: NDArray[np.int64], sent: bytes) -> NDArray[np.int64]:
     """Send time of every data packet, in stream order: the time of the write that completed it."""
-    from device.framer import DataPacket, Framer
+    from footnav.device.protocol.framer import DataPacket, Framer
 
     framer = Framer()
     out: list[int] = []
@@ -122,9 +122,9 @@ class _Collected:
 def _live(ports: list[str], samples: int, save: Path | None, sessions: Path, out: Path, step_smoothing: bool) -> int:
     """``footnav live`` on ``ports`` with a timing sink per foot; stop (as Ctrl-C does) once every
     foot has handed ``samples`` samples to its sinks; save what the sinks saw to ``out`` (npz)."""
-    from app.config import defaults
-    from app.live import LiveOptions, live_session
-    from pipeline.nav_types import NavBatch
+    from footnav.app.commands.live import LiveOptions, live_session
+    from footnav.app.config import defaults
+    from footnav.pipeline.nav_types import NavBatch
 
     wall0, cpu0 = time.monotonic(), time.process_time()
     feet = FEET[len(ports)]
@@ -326,7 +326,7 @@ class ReplayResult:
 
 
 def replay_run(minutes: float, work: Path, step_smoothing: bool = False) -> ReplayResult:
-    footnav = [sys.executable, "-m", "app"]
+    footnav = [sys.executable, "-m", "footnav.app"]
     sessions = work / "replay-sessions"
     t0 = time.perf_counter()
     gen = subprocess.Popen(

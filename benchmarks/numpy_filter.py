@@ -1,13 +1,13 @@
-"""The navigation filter of ``pipeline.eskf`` written plainly: one Python iteration per sample, numpy
+"""The navigation filter of ``footnav.pipeline.navigation.eskf`` written plainly: one Python iteration per sample, numpy
 (15, 15) matrices, ``F P Fᵀ + Q`` with full matrices, Joseph-form updates with ``np.linalg``.
 
 Two uses: the baseline the compiled filter's speed is quoted against (``python -m benchmarks``), and
 an independent reference for its results (``tests/test_filter_reference.py``). It follows the model,
-the parameters and the bad-input rules of ``pipeline.eskf.run_filter`` exactly, but none of its
+the parameters and the bad-input rules of ``footnav.pipeline.navigation.eskf.run_filter`` exactly, but none of its
 shortcuts (block-sparse propagation, rank-3 updates, one-triangle symmetry), so agreement checks them.
 
 References: Solà, "Quaternion kinematics for the error-state Kalman filter" (arXiv:1711.02508, 2017),
-sections 5-7; the model equations are in the ``pipeline.eskf`` module docstring.
+sections 5-7; the model equations are in the ``footnav.pipeline.navigation.eskf`` module docstring.
 """
 
 from __future__ import annotations
@@ -16,9 +16,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from footnav.pipeline.navigation import eskf
 from numpy.typing import NDArray
-
-from pipeline import eskf
 
 F64 = NDArray[np.float64]
 
@@ -34,7 +33,7 @@ _I15 = np.eye(15)
 
 @dataclass(frozen=True, slots=True)
 class FilterRun:
-    """Outputs of one run, shaped like ``pipeline.eskf.run_filter``'s.
+    """Outputs of one run, shaped like ``footnav.pipeline.navigation.eskf.run_filter``'s.
 
     Attributes:
         pos_n_m, vel_n_mps: (n, 3); quat_nb_wxyz: (n, 4); pos_cov_n_m2: (n, 4, 4) of (x, y, z, ψ).
@@ -105,9 +104,11 @@ def _zaru(
     x: F64, P: F64, gyr_b_radps: F64, par: F64, H_bg: F64, R_zaru: F64, counters: NDArray[np.int64]
 ) -> tuple[F64, F64]:
     """The χ²-gated zero-angular-rate update; a standing foot's turn about the vertical added to its
-    noise after the first stance (``pipeline.eskf``)."""
+    noise after the first stance (``footnav.pipeline.navigation.eskf``)."""
     y = gyr_b_radps - x[13:16]
-    S = H_bg @ P @ H_bg.T + par[eskf.PAR_ZARU_GATE_SIG] ** 2 * _I3  # the gate's noise (pipeline.eskf)
+    S = (
+        H_bg @ P @ H_bg.T + par[eskf.PAR_ZARU_GATE_SIG] ** 2 * _I3
+    )  # the gate's noise (footnav.pipeline.navigation.eskf)
     if float(y @ np.linalg.solve(S, y)) < par[eskf.PAR_ZARU_GATE]:
         counters[eskf.CNT_ZARU] += 1
         if counters[eskf.FLAG_STARTED] and counters[eskf.STATE_STANCE_RUN] > par[eskf.PAR_STANDING_AFTER]:
@@ -129,7 +130,7 @@ def run_filter_numpy(
     par: F64,
     gyr_clip_var_b: F64 | None = None,
 ) -> FilterRun:
-    """Run the filter sample by sample; arguments as ``pipeline.eskf.run_filter`` (not modified),
+    """Run the filter sample by sample; arguments as ``footnav.pipeline.navigation.eskf.run_filter`` (not modified),
     ``gyr_clip_var_b`` (n, 3) or None for none."""
     n = acc_b_mps2.shape[0]
     x, P = x.astype(np.float64).copy(), P.astype(np.float64).copy()

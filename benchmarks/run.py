@@ -1,6 +1,6 @@
 """Estimator throughput: detector, filter and both, against a plain numpy per-sample filter.
 
-Replays an emulated walk (``device.emulator``: 10 minutes at 1 kHz by default, MPU-6500-class sensor
+Replays an emulated walk (``footnav.device.emulator``: 10 minutes at 1 kHz by default, MPU-6500-class sensor
 errors) through the estimators the way ``footnav replay`` and ``footnav export`` do, in one big
 batch, on one core, and prints a table of samples per second. Each figure is the best of a few
 repeats (wall clock; the CPU-time figure beside it is less sensitive to other load on the machine).
@@ -26,14 +26,11 @@ from pathlib import Path
 
 import numba
 import numpy as np
-
-from benchmarks.numpy_filter import run_filter_numpy
-from device.emulator.gait import simulate_walk
-from device.emulator.imu_errors import corrupt
-from pipeline import eskf
-from pipeline.alignment import align_from_still
-from pipeline.detectors import StreamingDetector
-from pipeline.navigator import (
+from footnav.device.emulator.motion.gait import simulate_walk
+from footnav.device.emulator.sensors.imu_errors import corrupt
+from footnav.pipeline.navigation import eskf
+from footnav.pipeline.navigation.alignment import align_from_still
+from footnav.pipeline.navigation.navigator import (
     NO_CLIPPED_RATES,
     NavConfig,
     Navigator,
@@ -41,8 +38,11 @@ from pipeline.navigator import (
     navigate,
     zupt_ratio,
 )
-from pipeline.samples import ImuBatch
-from pipeline.step_smoother import StepSmoothingNavigator
+from footnav.pipeline.samples import ImuBatch
+from footnav.pipeline.smoothing.stepwise import StepSmoothingNavigator
+from footnav.pipeline.stance.detectors import StreamingDetector
+
+from benchmarks.numpy_filter import run_filter_numpy
 
 RATE_HZ = 1000.0
 ROOT = Path(__file__).resolve().parents[1]
@@ -103,7 +103,7 @@ _COMPILE_PROBE = """
 import time
 t0 = time.perf_counter()
 import numpy as np
-from pipeline.navigator import navigate
+from footnav.pipeline.navigation.navigator import navigate
 t1 = time.perf_counter()
 n = 3000
 acc = np.tile([0.0, 0.0, 9.80665], (n, 1)) + np.random.default_rng(0).normal(0, 0.01, (n, 3))
@@ -232,5 +232,5 @@ def main(argv: list[str] | None = None) -> int:
     if not args.no_compile:
         imp, cold, warm = compile_times()
         print(f"  numba compile time, first navigate() call: {cold:.1f} s with an empty cache, {warm:.2f} s cached")
-        print(f"  (importing pipeline.navigator: {imp:.2f} s)")
+        print(f"  (importing footnav.pipeline.navigation.navigator: {imp:.2f} s)")
     return 0

@@ -2,7 +2,7 @@
 
 ``python -m benchmarks.soak --minutes 60`` runs, and prints as one table:
 
-- an emulator child (:class:`device.emulator.pty_server.PtyShoeServer` per foot, the demo's walk and
+- an emulator child (:class:`footnav.device.emulator.serving.pty.PtyShoeServer` per foot, the demo's walk and
   sensor errors, optionally with wire faults) serving as fast as footnav reads (``--pace max``, the
   default: the firmware then waits for the host, so an hour takes minutes) or in real time;
 - a footnav child running exactly ``footnav live --left PTY --right PTY --no-viewer --save soak.rrd``
@@ -39,7 +39,7 @@ from typing import IO, TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from device.capture import CaptureSummary
+    from footnav.device.files.capture import CaptureSummary
 
 ROOT = Path(__file__).resolve().parents[1]
 FEET = ("left", "right")
@@ -47,9 +47,9 @@ FEET = ("left", "right")
 
 def _serve(seconds: float, pace: float, drop_rate: float, bit_error_rate: float) -> int:
     """Serve two emulated shoes; print their ports, then (once both finished) their totals."""
-    from app.demo import DemoOptions, demo_truth
-    from device.emulator.faults import WireFaults
-    from device.emulator.pty_server import PtyShoeServer
+    from footnav.app.commands.demo import DemoOptions, demo_truth
+    from footnav.device.emulator.serving.faults import WireFaults
+    from footnav.device.emulator.serving.pty import PtyShoeServer
 
     opts = DemoOptions(duration_s=seconds, feet=2)
     faults = WireFaults(drop_rate=drop_rate, bit_error_rate=bit_error_rate)
@@ -135,7 +135,7 @@ class SoakResult:
 
 def _only_acks(data: bytes) -> bool:
     """True if ``data`` is nothing but whole command ACK frames (``A0 cmd chk_hi chk_lo``)."""
-    from device.framer import DeviceAck, Framer
+    from footnav.device.protocol.framer import DeviceAck, Framer
 
     framer = Framer()
     frames = framer.feed(data)
@@ -144,9 +144,9 @@ def _only_acks(data: bytes) -> bool:
 
 def _account(capture: Path, summary: CaptureSummary, emulator: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """Per foot: capture bytes vs the emulator's, and packets received + lost vs packets sent."""
-    from device.capture import CaptureMessage, iter_capture
-    from device.framer import DataPacket, Framer
-    from device.imu_packets import CounterTracker
+    from footnav.device.files.capture import CaptureMessage, iter_capture
+    from footnav.device.protocol.framer import DataPacket, Framer
+    from footnav.device.protocol.imu import CounterTracker
 
     out: dict[str, dict[str, Any]] = {}
     for foot, emu in zip(FEET, emulator, strict=True):
@@ -209,7 +209,7 @@ def run_soak(
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     env.pop("DISPLAY", None)
     env.pop("WAYLAND_DISPLAY", None)
-    from device.capture import summarize_capture
+    from footnav.device.files.capture import summarize_capture
 
     emu = subprocess.Popen(
         [sys.executable, "-m", "benchmarks.soak", "_serve", "--seconds", str(minutes * 60.0), "--pace", str(pace),
@@ -223,7 +223,7 @@ def run_soak(
         t0 = time.monotonic()
         with open(work / "footnav.stderr", "w") as err:
             live = subprocess.Popen(
-                [sys.executable, "-m", "app", "live", "--left", ports[0], "--right", ports[1], "--no-viewer",
+                [sys.executable, "-m", "footnav.app", "live", "--left", ports[0], "--right", ports[1], "--no-viewer",
                  "--save", str(rrd), "--sessions", str(sessions)],
                 cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=err,
             )  # fmt: skip

@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final, Literal
 
-from device.ble_link import (
+from footnav.device.links.ble import (
     KNOWN_SERVICES,
     BleBackend,
     advertises_known_service,
@@ -168,8 +168,7 @@ async def ble_candidates(timeout_s: float, backend: BleBackend | None = None) ->
     """
     from bleak import BleakScanner
     from bleak.exc import BleakError
-
-    from pipeline.errors import DeviceError
+    from footnav.device.errors import DeviceError
 
     try:
         found = await BleakScanner.discover(timeout_s, return_adv=True, **scanner_kwargs(backend))
@@ -205,7 +204,7 @@ async def scan(
 
     Never raises for a missing Bluetooth stack: :attr:`ScanReport.ble_error` says so in one line.
     """
-    from pipeline.errors import DeviceError
+    from footnav.device.errors import DeviceError
 
     ports = await asyncio.to_thread(lambda: list((list_ports or _comports)()))
     serial = tuple(serial_candidates(ports))

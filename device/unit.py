@@ -11,7 +11,7 @@ Start (protocol-openshoe.md sections 3, 5, 6, 10):
 - modes: :class:`NormalImuMode` (0x40/0x41), :class:`RawImuMode` (``30 13 00`` then 0x28),
   :class:`InsMode` (``33 00 33`` then OUTPUT_STATE(S)), :class:`StepwiseMode` (0x34, or 0x14 on 2014
   firmware), plus the extension states (:meth:`OpenShoeUnit.enable_extensions`, see
-  :mod:`device.extensions`);
+  :mod:`footnav.device.protocol.extensions`);
 - in lossless mode (forced by SWDR) every data packet is ACKed, resends included (section 6).
 
 Stream: each read's packets become typed batches (:data:`Batch`), duplicates dropped, the package
@@ -35,17 +35,16 @@ from types import TracebackType
 from typing import Final, Literal, Protocol, Self
 
 import numpy as np
-
-from device import extensions, ins_states, raw_imu, stepwise
-from device import protocol as p
-from device.extensions import BaroBatch, TofBatch
-from device.framer import DataPacket, DeviceAck, Framer, PacketRun
-from device.imu_packets import PAYLOAD_LEN, CounterTracker, SharedTickClock, decode_payloads
-from device.ins_states import InsLayout, InsStateBatch
-from device.raw_imu import RawImuBatch, RawImuLayout
-from device.stepwise import StepBatch, StepwiseTracker
-from pipeline.errors import DeviceError, ProtocolError
-from pipeline.samples import ImuBatch
+from footnav.device.errors import DeviceError, ProtocolError
+from footnav.device.protocol import commands as p
+from footnav.device.protocol import extensions, ins_states, raw_imu, stepwise
+from footnav.device.protocol.extensions import BaroBatch, TofBatch
+from footnav.device.protocol.framer import DataPacket, DeviceAck, Framer, PacketRun
+from footnav.device.protocol.imu import PAYLOAD_LEN, CounterTracker, SharedTickClock, decode_payloads
+from footnav.device.protocol.ins_states import InsLayout, InsStateBatch
+from footnav.device.protocol.raw_imu import RawImuBatch, RawImuLayout
+from footnav.device.protocol.stepwise import StepBatch, StepwiseTracker
+from footnav.pipeline.samples import ImuBatch
 
 log = logging.getLogger(__name__)
 
@@ -174,7 +173,7 @@ class OpenShoeUnit:
     """One unit: probe, start a mode, stream typed batches, stop.
 
     Args:
-        link: an open byte link (e.g. :class:`device.serial_link.SerialLink`).
+        link: an open byte link (e.g. :class:`footnav.device.links.serial.SerialLink`).
         capture: optional tap called with every chunk read and written (for the capture file).
         command_set: the firmware's command set if known (skips the probe).
         read_interval_s: at most one read of the link per this interval. At 1 kHz a read holds about
@@ -227,9 +226,9 @@ class OpenShoeUnit:
         """Open ``port`` exclusively and return a unit on it (close with :meth:`close` or ``async with``).
 
         Raises:
-            DeviceError: see :meth:`device.serial_link.SerialLink.open`.
+            DeviceError: see :meth:`footnav.device.links.serial.SerialLink.open`.
         """
-        from device.serial_link import SerialLink
+        from footnav.device.links.serial import SerialLink
 
         link = SerialLink(port)
         await link.open()
@@ -286,9 +285,7 @@ class OpenShoeUnit:
             else:
                 old = p.Commands2014()
                 # Only now, with 2015 firmware ruled out, may a 2014 command that 2015 would misparse go out.
-                fallback = (
-                    old.stepwise_dead_reckoning() if isinstance(mode, StepwiseMode) else old.processing_off()
-                )
+                fallback = old.stepwise_dead_reckoning() if isinstance(mode, StepwiseMode) else old.processing_off()
                 if not await self._probe(fallback, probe_s, ruled_out=p.CommandSet.V2015):
                     raise DeviceError(
                         f"no answer from {self.link.name} to the start command within {probe_s:.1f} s "
@@ -497,9 +494,7 @@ class OpenShoeUnit:
         if isinstance(mode, StepwiseMode):
             cmd = c.stepwise_dead_reckoning()
         elif isinstance(mode, NormalImuMode):
-            cmd = c.normal_imu(
-                mode.rate_divider_log2, bias_estimation=mode.bias_estimation, lossless=mode.lossless
-            )
+            cmd = c.normal_imu(mode.rate_divider_log2, bias_estimation=mode.bias_estimation, lossless=mode.lossless)
         elif isinstance(mode, InsMode):
             cmd = c.reset_ins()
         else:
@@ -511,11 +506,7 @@ class OpenShoeUnit:
         if isinstance(mode, StepwiseMode):
             return [c.stepwise_dead_reckoning()]
         if isinstance(mode, NormalImuMode):
-            return [
-                c.normal_imu(
-                    mode.rate_divider_log2, bias_estimation=mode.bias_estimation, lossless=mode.lossless
-                )
-            ]
+            return [c.normal_imu(mode.rate_divider_log2, bias_estimation=mode.bias_estimation, lossless=mode.lossless)]
         if isinstance(mode, RawImuMode):
             return [
                 c.run_proc(p.PROC_READ_INERTIAL, 0),
@@ -532,9 +523,7 @@ class OpenShoeUnit:
         output = c.output_state(ids[0], rate) if len(ids) == 1 else c.output_states(ids, rate)
         return [c.reset_ins(), output]
 
-    async def _probe(
-        self, cmd: p.OutgoingCommand, timeout_s: float, *, ruled_out: p.CommandSet | None = None
-    ) -> bool:
+    async def _probe(self, cmd: p.OutgoingCommand, timeout_s: float, *, ruled_out: p.CommandSet | None = None) -> bool:
         """Send a probe command; on its ACK, adopt its set.
 
         The command must be one the other set's firmware drops unparsed, unless that other set was
@@ -658,11 +647,7 @@ class OpenShoeUnit:
             out.steps.append((number, payload))
         elif isinstance(mode, NormalImuMode) and n == PAYLOAD_LEN:
             out.normal.append((counter, payload))
-        elif (
-            isinstance(mode, RawImuMode)
-            and self._raw_layout is not None
-            and n == self._raw_layout.payload_len
-        ):
+        elif isinstance(mode, RawImuMode) and self._raw_layout is not None and n == self._raw_layout.payload_len:
             out.raw.append((counter, payload))
         elif isinstance(mode, InsMode) and self._ins_layout is not None and n == self._ins_layout.payload_len:
             out.ins.append((counter, payload))
@@ -743,9 +728,7 @@ class OpenShoeUnit:
                 )
             )
         if d.steps:
-            step_batch = self.steps.update(
-                [n for n, _ in d.steps], b"".join(pl for _, pl in d.steps), d.host_ns
-            )
+            step_batch = self.steps.update([n for n, _ in d.steps], b"".join(pl for _, pl in d.steps), d.host_ns)
             if step_batch is not None:
                 out.append(step_batch)
         # Extension readings first: a host that navigates the IMU batch of this read then already
@@ -754,9 +737,7 @@ class OpenShoeUnit:
         ext: list[Batch] = []
         if d.tof and t_tof is not None:
             tarr = extensions.decode_tof(b"".join(pl for _, pl in d.tof))
-            ext.append(
-                TofBatch(t_tof, tarr.sensor, tarr.range_m, tarr.status, counter_of(d.tof), host(len(d.tof)))
-            )
+            ext.append(TofBatch(t_tof, tarr.sensor, tarr.range_m, tarr.status, counter_of(d.tof), host(len(d.tof))))
         if d.baro and t_baro is not None:
             barr = extensions.decode_baro(b"".join(pl for _, pl in d.baro))
             m = len(d.baro)

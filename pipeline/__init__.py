@@ -1,6 +1,6 @@
 """Estimation on streamed samples: detectors, the error-state Kalman filter, and the stage runner.
 
-Estimators here are pure and synchronous (numpy, numba); only ``pipeline.runner`` knows asyncio.
+Estimators here are pure and synchronous (numpy, numba); only ``footnav.pipeline.runner`` knows asyncio.
 """
 
 import hashlib
@@ -10,8 +10,17 @@ import sys
 from pathlib import Path
 
 
+def sources_digest(root: Path) -> str:
+    """The first 16 hex digits of a SHA-256 over every ``*.py`` below ``root``, subfolders included,
+    each with its path relative to ``root``, in sorted order."""
+    digest = hashlib.sha256()
+    for source in sorted(root.rglob("*.py")):
+        digest.update(source.relative_to(root).as_posix().encode() + b"\0" + source.read_bytes())
+    return digest.hexdigest()[:16]
+
+
 def _key_numba_cache_by_source() -> None:
-    """Put numba's on-disk cache in a folder named by a hash of this package's sources.
+    """Put numba's on-disk cache in a folder named by a hash of every source of this package.
 
     Numba keys each cached kernel by its own module's file only, so a kernel that inlines a function
     from another module (the smoother's pass inlines ``eskf._correct``) kept running the old code
@@ -24,10 +33,7 @@ def _key_numba_cache_by_source() -> None:
     if os.environ.get("NUMBA_CACHE_DIR"):
         return
     here = Path(__file__).resolve().parent
-    digest = hashlib.sha256()
-    for source in sorted(here.glob("*.py")):
-        digest.update(source.name.encode() + source.read_bytes())
-    cache = here / "__pycache__" / f"numba-{digest.hexdigest()[:16]}"
+    cache = here / "__pycache__" / f"numba-{sources_digest(here)}"
     if not cache.is_dir():
         for old in cache.parent.glob("numba-*"):  # the kernels of sources that no longer exist
             shutil.rmtree(old, ignore_errors=True)

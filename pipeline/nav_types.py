@@ -10,9 +10,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
-    from pipeline.baro import PressureAltitude
-    from pipeline.clearance import StrideClearance
-    from pipeline.tof_aiding import RangeOutputs
+    from footnav.pipeline.aiding.baro import PressureAltitude
+    from footnav.pipeline.aiding.tof import RangeOutputs
+    from footnav.pipeline.gait.clearance import StrideClearance
 
 F64 = NDArray[np.float64]
 
@@ -34,9 +34,9 @@ class NavBatch:
         detector_threshold: (n,) the threshold in force at each sample (it adapts to the gait).
         clearance_m: (n,) height of the IMU above the floor under it, m: above ``floor_z_m`` when the
             ToF sensors give it (except between the hits on both sides of a step edge, where the
-            floor is interpolated between the two treads: ``pipeline.tof_aiding``), else above the
+            floor is interpolated between the two treads: ``footnav.pipeline.aiding.tof``), else above the
             floor level of the foot's stance, in swing of the stance it left
-            (``pipeline.stance_levels``; without them, the floor the walk started on, z = 0).
+            (``footnav.pipeline.stance.levels``; without them, the floor the walk started on, z = 0).
         host_ns: (n,) host receive time of each sample (latency accounting).
         cov_pos_yaw: (n, 4, 4) covariance of (x, y, z, ψ) when the estimator provides it (steps,
             heading uncertainty); ``pos_cov_n_m2`` is its upper-left block.
@@ -45,7 +45,7 @@ class NavBatch:
         strides: per-stride clearance of the swings that ended in these samples, else None.
         altitude: barometer pressure altitude of the readings received since the last batch, else None.
         smoothed: step-smoothed estimates of earlier samples whose step ended in this batch
-            (``pipeline.step_smoother``), else None.
+            (``footnav.pipeline.smoothing.stepwise``), else None.
     """
 
     t_s: F64
@@ -71,7 +71,7 @@ class NavBatch:
 
 @dataclass(frozen=True, slots=True)
 class SmoothedSpan:
-    """Smoothed estimates of consecutive samples already given causally (``pipeline.step_smoother``).
+    """Smoothed estimates of consecutive samples already given causally (``footnav.pipeline.smoothing.stepwise``).
 
     Attributes:
         first_sample: index of the first of them among the navigated samples (0: the first sample

@@ -18,10 +18,10 @@ import asyncio
 from collections.abc import AsyncIterator, Callable, Sequence
 from typing import Any, Protocol, TypeVar, cast
 
-from pipeline.baro import PressureBatch
-from pipeline.nav_types import NavBatch
-from pipeline.samples import ImuBatch
-from pipeline.tof_aiding import RangeBatch
+from footnav.pipeline.aiding.baro import PressureBatch
+from footnav.pipeline.aiding.tof import RangeBatch
+from footnav.pipeline.nav_types import NavBatch
+from footnav.pipeline.samples import ImuBatch
 
 NavSink = Callable[[NavBatch], object]  # return values are ignored
 SourceItem = ImuBatch | RangeBatch | PressureBatch
@@ -32,8 +32,8 @@ B = TypeVar("B")
 
 
 class BatchNavigator(Protocol[BatchT_contra]):
-    """What the runner drives: ``pipeline.navigator.Navigator`` (``ImuBatch``) or
-    ``pipeline.dual_navigator.DualNavigator`` (two-IMU batches)."""
+    """What the runner drives: ``footnav.pipeline.navigation.navigator.Navigator`` (``ImuBatch``) or
+    ``footnav.pipeline.dual_imu.navigator.DualNavigator`` (two-IMU batches)."""
 
     def process(self, batch: BatchT_contra) -> NavBatch | None:
         """Estimates for the batch's samples (None while there are none yet)."""
@@ -41,7 +41,8 @@ class BatchNavigator(Protocol[BatchT_contra]):
 
 
 class AidedNavigator(Protocol):
-    """A navigator that also takes ToF ranges and barometer readings (``pipeline.navigator.Navigator``)."""
+    """A navigator that also takes ToF ranges and barometer readings
+    (``footnav.pipeline.navigation.navigator.Navigator``)."""
 
     def add_ranges(self, batch: RangeBatch) -> None: ...
 

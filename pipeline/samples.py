@@ -35,7 +35,7 @@ class ImuBatch:
         host_ns: (n,) host receive time, ``time.monotonic_ns()`` of the read that completed the packet.
         gyr_clipped_b: (n, 3) which rates were cut off at the sensor's range (reconstructed where they
             could be), or None (not known: live streams; found in whole recordings by
-            ``pipeline.saturation``).
+            ``footnav.pipeline.navigation.saturation``).
     """
 
     t_s: F64

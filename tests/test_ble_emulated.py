@@ -19,15 +19,16 @@ import numpy as np
 import pytest
 from bleak import BleakClient, BleakScanner
 from bumble.link import LocalLink
-
-from device import ble_link, discovery, protocol
-from device.ble_link import BleBackend, BleLink
-from device.emulator.ble_backend import BumbleAdapter, BumbleClient, BumbleScanner, bumble_backend
-from device.emulator.ble_peripheral import BleShoePeripheral, Profile, link_budget_bps
-from device.links import LinkEvent, ReconnectingLink
-from device.unit import OpenShoeUnit
-from pipeline.errors import DeviceError
-from pipeline.samples import ImuBatch
+from footnav.device import discovery
+from footnav.device.emulator.serving.ble_backend import BumbleAdapter, BumbleClient, BumbleScanner, bumble_backend
+from footnav.device.emulator.serving.ble_peripheral import BleShoePeripheral, Profile, link_budget_bps
+from footnav.device.errors import DeviceError
+from footnav.device.links import ble as ble_link
+from footnav.device.links.ble import BleBackend, BleLink
+from footnav.device.links.reconnecting import LinkEvent, ReconnectingLink
+from footnav.device.protocol import commands as protocol
+from footnav.device.unit import OpenShoeUnit
+from footnav.pipeline.samples import ImuBatch
 
 
 def synth(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -301,10 +302,10 @@ async def test_stepwise_dead_reckoning_over_ble_acks_resends_and_dedup_give_the_
 ) -> None:
     """SWDR through bleak's public API: every packet ACKed (resends too), each package number applied
     once, the track equal to the emulator's step sums."""
-    from device.emulator.gait import simulate_walk
-    from device.emulator.scripts import steps_from_truth, yaw_from_quat_wxyz
-    from device.stepwise import StepBatch
-    from device.unit import StepwiseMode
+    from footnav.device.emulator.motion.gait import simulate_walk
+    from footnav.device.emulator.scripts import steps_from_truth, yaw_from_quat_wxyz
+    from footnav.device.protocol.stepwise import StepBatch
+    from footnav.device.unit import StepwiseMode
 
     walk = simulate_walk("rectangle", 25.0, seed=1)
     steps = steps_from_truth(walk.t_s, walk.pos_n_m, yaw_from_quat_wxyz(walk.quat_nb_wxyz), walk.stance)
@@ -350,11 +351,11 @@ async def test_stepwise_dead_reckoning_over_ble_acks_resends_and_dedup_give_the_
 async def test_live_over_ble_at_250_hz_carries_on_through_a_disconnect(radio: Radio, tmp_path: Path) -> None:
     """``footnav live --ble FOOT-L`` in-process, with bumble's backend injected through the test-only
     ``LiveOptions.ble_backend``: 250 Hz by default over BLE, a drop reconnected and recorded."""
-    from app.config import CLI, defaults
-    from app.live import LiveOptions, live_session
-    from device.capture import read_capture_info, summarize_capture
-    from device.emulator.gait import simulate_walk
-    from pipeline.nav_types import NavBatch
+    from footnav.app.commands.live import LiveOptions, live_session
+    from footnav.app.config import CLI, defaults
+    from footnav.device.emulator.motion.gait import simulate_walk
+    from footnav.device.files.capture import read_capture_info, summarize_capture
+    from footnav.pipeline.nav_types import NavBatch
 
     walk = simulate_walk("rectangle", 16.0, seed=1)
     navigated: list[NavBatch] = []

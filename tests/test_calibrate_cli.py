@@ -11,14 +11,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from app.calibrate import DEMO_MCU_ID, CalibrateOptions, run_calibrate
-from app.calibration_store import ENV_DIR, calibration_dir, load_calibration
-from app.cli import main
-from app.config import CLI, Config, defaults
-from device.capture import CaptureWriter, UnitHeader
-from device.emulator.icosahedron import Miscalibration
-from pipeline.calibration import TOLERANCE
+from footnav.app.calibration_store import ENV_DIR, calibration_dir, load_calibration
+from footnav.app.cli import main
+from footnav.app.commands.calibrate import DEMO_MCU_ID, CalibrateOptions, run_calibrate
+from footnav.app.config import CLI, Config, defaults
+from footnav.device.emulator.sensors.icosahedron import Miscalibration
+from footnav.device.files.capture import CaptureWriter, UnitHeader
+from footnav.pipeline.calibration.model import TOLERANCE
 
 
 def _config(tmp_path: Path) -> Config:
@@ -101,13 +100,12 @@ async def test_over_ble_the_procedure_runs_at_125_hz_and_too_few_faces_are_refus
     MCU id, raw output with temperature at the BLE default of 125 Hz, three faces captured, then the
     unit has nothing more to send and the fit refuses with what to redo."""
     from bumble.link import LocalLink
-
-    from app.calibrate import calibrate_session
-    from app.session import UnitAddress
-    from device.emulator.ble_backend import BumbleAdapter, bumble_backend
-    from device.emulator.ble_peripheral import BleShoePeripheral
-    from device.emulator.icosahedron import miscalibrated_signals, simulate_icosahedron, warm_up_c
-    from pipeline.calibration import TooFewFacesError
+    from footnav.app.commands.calibrate import calibrate_session
+    from footnav.app.session import UnitAddress
+    from footnav.device.emulator.sensors.icosahedron import miscalibrated_signals, simulate_icosahedron, warm_up_c
+    from footnav.device.emulator.serving.ble_backend import BumbleAdapter, bumble_backend
+    from footnav.device.emulator.serving.ble_peripheral import BleShoePeripheral
+    from footnav.pipeline.calibration.model import TooFewFacesError
 
     truth = simulate_icosahedron(1000.0, n_faces=3)
     temp = warm_up_c(truth.t_s)
@@ -136,6 +134,6 @@ async def test_over_ble_the_procedure_runs_at_125_hz_and_too_few_faces_are_refus
     text = out.getvalue()
     assert f"MCU id {DEMO_MCU_ID.hex()}" in text and text.count("captured:") == 3
     (capture,) = (tmp_path / "sessions").glob("calibrate-*.mcap")
-    from device.capture import read_capture_info
+    from footnav.device.files.capture import read_capture_info
 
     assert read_capture_info(capture).units[0].settings["rate_hz"] == 125.0

@@ -8,8 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
-
-from device.emulator.icosahedron import (
+from footnav.device.emulator.sensors.icosahedron import (
     IcosahedronTruth,
     Miscalibration,
     icosahedron_face_normals,
@@ -17,7 +16,7 @@ from device.emulator.icosahedron import (
     simulate_icosahedron,
     warm_up_c,
 )
-from pipeline.calibration import (
+from footnav.pipeline.calibration.model import (
     ACC_LIMIT_MPS2,
     STANDARD_GRAVITY_MPS2,
     TOLERANCE,
@@ -31,7 +30,7 @@ from pipeline.calibration import (
     forward_model,
     invert_model,
 )
-from pipeline.calibration_procedure import FaceCollector, ProcedureEvent
+from footnav.pipeline.calibration.procedure import FaceCollector, ProcedureEvent
 
 RATE_HZ = 1000.0
 

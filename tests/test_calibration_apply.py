@@ -11,17 +11,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from app.calibration_store import save_calibration
-from app.config import CLI, Config, defaults
-from app.demo import DemoOptions, demo_truth, run_demo
-from app.experiments.calibration import calibrate_emulated
-from app.replay import ReplayOptions, run_replay
-from device import protocol
-from device.capture import iter_capture, summarize_capture
-from device.emulator.icosahedron import MISCALIBRATED_MCU_ID, Miscalibration
-from pipeline.nav_types import NavBatch
-from views.convert import concat_batches
+from footnav.app.calibration_store import save_calibration
+from footnav.app.commands.demo import DemoOptions, demo_truth, run_demo
+from footnav.app.commands.replay import ReplayOptions, run_replay
+from footnav.app.config import CLI, Config, defaults
+from footnav.app.experiments.calibration import calibrate_emulated
+from footnav.device.emulator.sensors.icosahedron import MISCALIBRATED_MCU_ID, Miscalibration
+from footnav.device.files.capture import iter_capture, summarize_capture
+from footnav.device.protocol import commands as protocol
+from footnav.pipeline.nav_types import NavBatch
+from footnav.views.convert import concat_batches
 
 DURATION_S = 20.0
 

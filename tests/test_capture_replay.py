@@ -14,13 +14,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mcap.writer import Writer
-
-from app.config import defaults
-from app.demo import DemoOptions, run_demo
-from app.export import run_export
-from app.replay import FULL_SPEED_JOIN_SAMPLES, ReplayOptions, run_replay
-from device.capture import (
+from footnav.app.commands.demo import DemoOptions, run_demo
+from footnav.app.commands.export import run_export
+from footnav.app.commands.replay import FULL_SPEED_JOIN_SAMPLES, ReplayOptions, run_replay
+from footnav.app.config import defaults
+from footnav.device.files.capture import (
     FLUSH_PERIOD_S,
     CaptureInfo,
     CaptureWriter,
@@ -29,9 +27,10 @@ from device.capture import (
     read_capture_info,
     summarize_capture,
 )
-from pipeline.errors import InputFormatError
-from pipeline.nav_types import NavBatch
-from views.convert import concat_batches
+from footnav.pipeline.errors import InputFormatError
+from footnav.pipeline.nav_types import NavBatch
+from footnav.views.convert import concat_batches
+from mcap.writer import Writer
 
 FIELDS = ("t_s", "pos_n_m", "vel_n_mps", "quat_nb_wxyz", "pos_cov_n_m2", "stance", "detector_stat",
           "detector_threshold", "clearance_m", "host_ns")  # fmt: skip
@@ -182,7 +181,10 @@ def test_foreign_files_name_what_was_expected(tmp_path: Path) -> None:
             replay(path)
         assert needle in str(err.value)
     proc = subprocess.run(
-        [sys.executable, "-m", "app", "replay", str(csv), "--no-viewer"], capture_output=True, text=True, check=False
+        [sys.executable, "-m", "footnav.app", "replay", str(csv), "--no-viewer"],
+        capture_output=True,
+        text=True,
+        check=False,
     )
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert "unsupported format" in proc.stderr and "expected a footnav capture (.mcap" in proc.stderr
@@ -191,7 +193,7 @@ def test_foreign_files_name_what_was_expected(tmp_path: Path) -> None:
 def test_kill_9_leaves_a_readable_capture(tmp_path: Path) -> None:
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "app", "demo", "--duration", "30", "--no-viewer", "--sessions", str(tmp_path)],
+        [sys.executable, "-m", "footnav.app", "demo", "--duration", "30", "--no-viewer", "--sessions", str(tmp_path)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         env=env,
@@ -232,7 +234,7 @@ def _file_size_limit(limit_bytes: int) -> Callable[[], None]:
 
 def test_full_disk_stops_the_capture_with_a_message_and_the_session_goes_on(tmp_path: Path) -> None:
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    command = [sys.executable, "-m", "app", "demo", "--duration", "60", "--pace", "max", "--no-viewer"]
+    command = [sys.executable, "-m", "footnav.app", "demo", "--duration", "60", "--pace", "max", "--no-viewer"]
     proc = subprocess.run(
         [*command, "--sessions", str(tmp_path)],
         check=False,

@@ -1,11 +1,10 @@
-"""Per-stride clearance (pipeline.clearance) on the emulator's true clearance, batched any way."""
+"""Per-stride clearance (footnav.pipeline.gait.clearance) on the emulator's true clearance, batched any way."""
 
 from __future__ import annotations
 
 import numpy as np
-
-from device.emulator.gait import CLEARANCE_PEAK_M, simulate_walk
-from pipeline.clearance import StrideClearanceTracker
+from footnav.device.emulator.motion.gait import CLEARANCE_PEAK_M, simulate_walk
+from footnav.pipeline.gait.clearance import StrideClearanceTracker
 
 
 def test_stride_clearance_from_truth_in_any_batching() -> None:

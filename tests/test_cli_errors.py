@@ -11,8 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from device.emulator.pty_server import PtyShoeServer
+from footnav.device.emulator.serving.pty import PtyShoeServer
 
 NO_BLUETOOTH = {"DBUS_SYSTEM_BUS_ADDRESS": "unix:path=/nonexistent/footnav-test-bus"}
 """Forces bleak's BlueZ backend onto a system bus that is not there: no Bluetooth stack."""
@@ -21,7 +20,7 @@ NO_BLUETOOTH = {"DBUS_SYSTEM_BUS_ADDRESS": "unix:path=/nonexistent/footnav-test-
 def _footnav(*args: str, timeout: float = 60, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "DISPLAY": "", "WAYLAND_DISPLAY": "", **(env or {})}
     return subprocess.run(
-        [sys.executable, "-m", "app", *args],
+        [sys.executable, "-m", "footnav.app", *args],
         capture_output=True,
         text=True,
         timeout=timeout,

@@ -9,14 +9,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
-from app.export import EXPORT_COLUMNS, STEP_COLUMNS
-from device.capture import MCAP_MAGIC
+from footnav.app.commands.export import EXPORT_COLUMNS, STEP_COLUMNS
+from footnav.device.files.capture import MCAP_MAGIC
 
 
 def _footnav(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "app", *args], capture_output=True, text=True, timeout=300, check=False
+        [sys.executable, "-m", "footnav.app", *args], capture_output=True, text=True, timeout=300, check=False
     )
 
 
@@ -38,7 +37,8 @@ def test_export_writes_one_row_per_sample(tmp_path: Path, shared_data: Path) -> 
 
 def test_export_says_what_it_did_with_doubtful_input(tmp_path: Path, shared_data: Path) -> None:
     """The summary line counts the x-io file's duplicated time stamps (not integrated) and, on the PyShoe
-    trial with a mid-swing "stance", the zero-velocity samples the filter skipped (``pipeline.eskf``)."""
+    trial with a mid-swing "stance", the zero-velocity samples the filter skipped
+    (``footnav.pipeline.navigation.eskf``)."""
     proc = _footnav("export", str(shared_data / "xio-gait-tracking" / "short_walk.csv"), "-o", str(tmp_path / "x.csv"))
     assert proc.returncode == 0, proc.stderr
     assert re.search(r"; \d+ non-positive time steps \(not integrated\)", proc.stdout), proc.stdout
@@ -66,7 +66,7 @@ def test_evaluate_prints_a_table_and_summary(shared_data: Path) -> None:
     assert "ARMSE2D" in proc.stdout and "data_inert" in proc.stdout and "2017-11-22-11-22-03" in proc.stdout
     assert "ground truth (1 files)" in proc.stdout and "closed loops (1 files)" in proc.stdout
     # the handling of doubtful input, per file: this trial has a 1-sample mid-swing "stance", and its
-    # gyroscope clips on the pitch axis (pipeline.saturation)
+    # gyroscope clips on the pitch axis (footnav.pipeline.navigation.saturation)
     assert re.search(r"input handling:\n(  .*\n)*  2017-11-22-11-22-03: .*1 zero-velocity samples skipped", proc.stdout)
     assert "82 gyroscope values taken as clipped at the sensor's range (36 raised by the reconstruction" in proc.stdout
 
@@ -122,7 +122,7 @@ def test_export_steps_against_the_motion_capture(tmp_path: Path, shared_data: Pa
     lengths match the motion capture's displacement between the same samples (measured: 23 steps,
     median difference 1.8 cm, 90th percentile 2.8 cm, the largest 6.1 cm on the last, a 13 cm shuffle;
     1.6 % short on average) and the steps add up to the track."""
-    from pipeline.loaders import load_recording
+    from footnav.device.files.recordings import load_recording
 
     trial = shared_data / "pyshoe-vicon" / "2017-11-22-11-22-03.mat"
     track_path, steps_path = tmp_path / "track.csv", tmp_path / "steps.csv"

@@ -9,11 +9,10 @@ import sys
 from pathlib import Path
 
 import pytest
-
-from app.config import CLI, ConfigError, apply_capture_settings, defaults, load_config
-from pipeline.navigator import NavConfig
-from pipeline.profiles import PROFILES
-from pipeline.tof_aiding import TofConfig
+from footnav.app.config import CLI, ConfigError, apply_capture_settings, defaults, load_config
+from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.navigation.navigator import NavConfig
+from footnav.pipeline.navigation.profiles import PROFILES
 
 TOML = """
 [session]
@@ -145,7 +144,7 @@ def test_config_command_shows_values_and_sources(tmp_path: Path) -> None:
     (tmp_path / "footnav.toml").write_text(TOML)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
     proc = subprocess.run(
-        [sys.executable, "-m", "app", "config", "--rate-divider", "2"],
+        [sys.executable, "-m", "footnav.app", "config", "--rate-divider", "2"],
         capture_output=True, text=True, cwd=tmp_path, env=env, check=False,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
@@ -160,7 +159,7 @@ def test_config_command_shows_values_and_sources(tmp_path: Path) -> None:
     line = next(x for x in out.splitlines() if x.startswith("dt_max_s = "))
     assert line.rstrip().endswith("# default")
     bad = subprocess.run(
-        [sys.executable, "-m", "app", "config", "--config", str(tmp_path / "missing.toml")],
+        [sys.executable, "-m", "footnav.app", "config", "--config", str(tmp_path / "missing.toml")],
         capture_output=True, text=True, env=env, check=False,
     )  # fmt: skip
     assert bad.returncode == 2 and "cannot read the configuration file" in bad.stderr

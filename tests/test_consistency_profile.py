@@ -5,12 +5,12 @@ from __future__ import annotations
 import math
 
 import pytest
+from footnav.device.emulator.sensors.imu_errors import IMU_GRADES
+from footnav.pipeline.navigation import eskf
+from footnav.pipeline.navigation.navigator import filter_parameters
+from footnav.pipeline.navigation.profiles import get_profile
 
 from benchmarks.consistency import profile_of_grade
-from device.emulator.imu_errors import IMU_GRADES
-from pipeline import eskf
-from pipeline.navigator import filter_parameters
-from pipeline.profiles import get_profile
 
 
 @pytest.mark.parametrize("rate_hz", [200.0, 1000.0])

@@ -7,14 +7,13 @@ import os
 
 import numpy as np
 import pytest
+from footnav.device.protocol import extensions, ins_states, raw_imu, stepwise
+from footnav.device.protocol.commands import data_packet
+from footnav.device.protocol.framer import DataPacket, Framer
+from footnav.device.protocol.imu import frame_payload_rows
+from footnav.device.protocol.raw_imu import RawImuLayout
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from device import extensions, ins_states, raw_imu, stepwise
-from device.framer import DataPacket, Framer
-from device.imu_packets import frame_payload_rows
-from device.protocol import data_packet
-from device.raw_imu import RawImuLayout
 
 
 def h(text: str) -> bytes:
@@ -183,9 +182,7 @@ def test_stepwise_standing_still_is_not_a_step() -> None:
     assert batch.is_step.tolist() == [False, True, False]
     assert (tracker.steps, tracker.stationary) == (1, 2)
     assert batch.heading_rad[-1] == pytest.approx(0.3)  # a turn on the spot still counts
-    np.testing.assert_allclose(
-        batch.pos_n_m[-1], [0.01 + 0.7 * math.cos(0.3), 0.7 * math.sin(0.3), 0], atol=1e-6
-    )
+    np.testing.assert_allclose(batch.pos_n_m[-1], [0.01 + 0.7 * math.cos(0.3), 0.7 * math.sin(0.3), 0], atol=1e-6)
 
 
 def test_stepwise_counter_wraps() -> None:
@@ -196,9 +193,7 @@ def test_stepwise_counter_wraps() -> None:
 
 def test_extension_round_trips() -> None:
     t = np.array([1, 2, 3, 2**32 + 5])
-    tof = extensions.encode_tof(
-        t, np.array([0, 1, 2, 0]), np.array([0.123, np.nan, 1.5, 0.2]), np.array([0, 1, 0, 4])
-    )
+    tof = extensions.encode_tof(t, np.array([0, 1, 2, 0]), np.array([0.123, np.nan, 1.5, 0.2]), np.array([0, 1, 0, 4]))
     assert tof.shape == (4, extensions.TOF_PAYLOAD_LEN)
     assert tof[0].tobytes() == h("E1 00000001 00 007B 00")
     arr = extensions.decode_tof(tof.tobytes())

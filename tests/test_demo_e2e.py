@@ -20,7 +20,7 @@ N_SAMPLES = 60_000  # 60 s at 1 kHz
 def _run_demo(*args: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     return subprocess.run(
-        [sys.executable, "-m", "app", "demo", *args],
+        [sys.executable, "-m", "footnav.app", "demo", *args],
         capture_output=True,
         text=True,
         timeout=timeout,
@@ -88,7 +88,7 @@ def test_recording_holds_every_sample_on_one_timeline(demo_rrd: tuple[Path, str]
 
 def test_recording_holds_the_step_smoothed_track(demo_rrd: tuple[Path, str]) -> None:
     """With ``--step-smoothing``, each step's samples smoothed once it has ended
-    (``pipeline.step_smoother``), logged at their own times: all but the last open step. (Whether
+    (``footnav.pipeline.smoothing.stepwise``), logged at their own times: all but the last open step. (Whether
     smoothing helps is measured on real feet, ``tests/test_accuracy.py``: the emulated walk's few
     millimetres are mostly its heading's, which no smoother changes; measured 6.82 mm RMS against
     6.76 causal.)"""
@@ -100,7 +100,7 @@ def test_recording_holds_the_step_smoothed_track(demo_rrd: tuple[Path, str]) -> 
 
     smoothed, track, truth = (table(e) for e in ("/world/foot/smoothed", "/world/foot/track", "/world/truth/foot"))
     clearance = table("/plots/clearance/foot/smoothed")
-    n = smoothed.num_rows  # every 10th sample (views.logger.SMOOTHED_EVERY)
+    n = smoothed.num_rows  # every 10th sample (footnav.views.logger.SMOOTHED_EVERY)
     assert (N_SAMPLES - 2_000) // 10 < n < N_SAMPLES // 10 and clearance.num_rows == n  # the walk ends standing
     t_s = pc.cast(smoothed["imu_time"], pa.int64()).to_numpy()
     assert np.array_equal(t_s, pc.cast(track["imu_time"], pa.int64()).to_numpy()[: 10 * n : 10])
@@ -129,7 +129,18 @@ def test_realtime_pace_and_interrupt(tmp_path: Path) -> None:
     path = tmp_path / "cut.rrd"
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "app", "demo", "--duration", "30", "--save", str(path), "--sessions", str(tmp_path)],
+        [
+            sys.executable,
+            "-m",
+            "footnav.app",
+            "demo",
+            "--duration",
+            "30",
+            "--save",
+            str(path),
+            "--sessions",
+            str(tmp_path),
+        ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

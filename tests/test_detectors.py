@@ -6,8 +6,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-
-from pipeline.detectors import DETECTOR_KINDS, DetectorKind, DetectorParams, StreamingDetector, statistic
+from footnav.pipeline.stance.detectors import DETECTOR_KINDS, DetectorKind, DetectorParams, StreamingDetector, statistic
 
 
 def _by_definition(acc: np.ndarray, gyr: np.ndarray, w: int, p: DetectorParams) -> np.ndarray:
@@ -44,9 +43,7 @@ def _walkish(n: int, seed: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 def test_statistic_matches_definition(kind: DetectorKind) -> None:
     acc, gyr, _ = _walkish(1200)
     p = DetectorParams(kind=kind)
-    np.testing.assert_allclose(
-        statistic(acc, gyr, 7, p), _by_definition(acc, gyr, 7, p), rtol=1e-7, atol=1e-6
-    )
+    np.testing.assert_allclose(statistic(acc, gyr, 7, p), _by_definition(acc, gyr, 7, p), rtol=1e-7, atol=1e-6)
 
 
 @pytest.mark.parametrize("adaptive", [False, True])

@@ -6,9 +6,8 @@ import importlib
 import subprocess
 import sys
 
+from footnav.device import discovery
 from serial.tools.list_ports_common import ListPortInfo
-
-from device import discovery
 
 
 def port(
@@ -61,8 +60,9 @@ async def test_scan_with_no_ports_says_so() -> None:
 
 def test_runtime_modules_do_not_import_bumble() -> None:
     code = (
-        "import sys, device.ble_link, device.links, device.discovery, device.unit; "
+        "import sys, footnav.device.links.ble, footnav.device.links.reconnecting, footnav.device.discovery, "
+        "footnav.device.unit; "
         "assert not [m for m in sys.modules if m.startswith('bumble')], 'bumble imported'"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
-    importlib.import_module("device.discovery")
+    importlib.import_module("footnav.device.discovery")

@@ -8,20 +8,24 @@ import math
 
 import numpy as np
 import pytest
+from footnav.device.emulator.motion import paths
+from footnav.device.emulator.motion.gait import simulate_walk
+from footnav.device.emulator.sensors.dual_imu import (
+    DEFAULT_LEVER_B_M,
+    angular_acceleration,
+    rigid_board,
+    simulate_dual_imu,
+)
+from footnav.device.emulator.sensors.imu_errors import IMU_GRADES
+from footnav.device.emulator.serving.pty import PtyShoeServer
+from footnav.device.protocol import raw_imu
+from footnav.device.protocol.raw_imu import RawImuBatch
+from footnav.device.unit import OpenShoeUnit, RawImuMode
+from footnav.pipeline.dual_imu.board_eskf import run_dual_eskf
+from footnav.pipeline.dual_imu.model import quat_to_mats
+from footnav.pipeline.stance.detectors import DetectorParams, StreamingDetector
 from test_gait import _strapdown
 from test_modes_emulated import gather, of
-
-from device import raw_imu
-from device.emulator import paths
-from device.emulator.dual_imu import DEFAULT_LEVER_B_M, angular_acceleration, rigid_board, simulate_dual_imu
-from device.emulator.gait import simulate_walk
-from device.emulator.imu_errors import IMU_GRADES
-from device.emulator.pty_server import PtyShoeServer
-from device.raw_imu import RawImuBatch
-from device.unit import OpenShoeUnit, RawImuMode
-from pipeline.detectors import DetectorParams, StreamingDetector
-from pipeline.dual_imu_common import quat_to_mats
-from pipeline.dual_imu_eskf import run_dual_eskf
 
 
 def test_imu2_strapdown_reproduces_p1_plus_rotated_lever_arm() -> None:

@@ -7,15 +7,14 @@ import math
 
 import numpy as np
 import pytest
-
-from app.experiments.dual_imu import COURSES, METHODS, TableRow, error_table, format_table
-from device import raw_imu
-from device.emulator.dual_imu import DEFAULT_LEVER_B_M, simulate_dual_imu
-from pipeline.detectors import DetectorParams, StreamingDetector
-from pipeline.dual_imu_eskf import run_dual_eskf
-from pipeline.dual_imu_lever import check_lever_arm
-from pipeline.dual_imu_paper import run_paper
-from pipeline.profiles import get_profile
+from footnav.app.experiments.dual_imu import COURSES, METHODS, TableRow, error_table, format_table
+from footnav.device.emulator.sensors.dual_imu import DEFAULT_LEVER_B_M, simulate_dual_imu
+from footnav.device.protocol import raw_imu
+from footnav.pipeline.dual_imu.board_eskf import run_dual_eskf
+from footnav.pipeline.dual_imu.chen2022 import run_paper
+from footnav.pipeline.dual_imu.lever_arm import check_lever_arm
+from footnav.pipeline.navigation.profiles import get_profile
+from footnav.pipeline.stance.detectors import DetectorParams, StreamingDetector
 
 SEEDS = [0, 1, 2, 3]
 """Four walks per course: single runs vary by a factor of five (the classic filter's heading drift
@@ -212,10 +211,11 @@ def test_footnav_dual_integrates_a_corrupt_time_stamp_gap_as_dt_max() -> None:
 
 @pytest.mark.parametrize(("ratio", "applied"), [(0.9, False), (0.1, True)])
 def test_dual_filter_skips_an_unsure_stance_of_a_moving_foot(ratio: float, applied: bool) -> None:
-    """The dual-IMU filter has the single-IMU filter's gate (``pipeline.eskf``): an unsure stance sample
+    """The dual-IMU filter has the single-IMU filter's gate (``footnav.pipeline.navigation.eskf``): an unsure
+    stance sample
     while the filter knows the board moves at 1.9 m/s is skipped, with the stance's other updates, and
     flagged (its stance then gives no floor level); a sure one is applied."""
-    from pipeline.dual_imu_eskf import AUX_LAST_REJECTED, DualEskfConfig, DualEskfStream
+    from footnav.pipeline.dual_imu.board_eskf import AUX_LAST_REJECTED, DualEskfConfig, DualEskfStream
 
     rate = 1000.0
     f_b = np.array([0.0, 0.0, 9.80665])

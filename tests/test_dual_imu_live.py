@@ -12,15 +12,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from footnav.device.emulator.sensors.dual_imu import DEFAULT_LEVER_B_M, simulate_dual_imu
+from footnav.device.protocol.raw_imu import RawImuBatch
+from footnav.pipeline.dual_imu.board_eskf import run_dual_eskf
+from footnav.pipeline.dual_imu.navigator import DualNavConfig, DualNavigator
+from footnav.pipeline.navigation.navigator import zupt_ratio
+from footnav.pipeline.stance.detectors import DetectorParams, StreamingDetector
+from footnav.views.paths import TIMELINE, DualPaths, FootPaths
 from rerun.chunk import RrdReader
-
-from device.emulator.dual_imu import DEFAULT_LEVER_B_M, simulate_dual_imu
-from device.raw_imu import RawImuBatch
-from pipeline.detectors import DetectorParams, StreamingDetector
-from pipeline.dual_imu_eskf import run_dual_eskf
-from pipeline.dual_navigator import DualNavConfig, DualNavigator
-from pipeline.navigator import zupt_ratio
-from views.paths import TIMELINE, DualPaths, FootPaths
 
 
 def test_streaming_dual_navigator_equals_the_whole_record_filter_however_batched() -> None:
@@ -64,9 +63,7 @@ def test_dual_navigator_stance_levels_hold_the_height_however_batched() -> None:
     true_z = rec.truth.imu1.pos_n_m[:, 2]
     _, whole = _navigate_in_batches(DualNavConfig(), rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, cuts=0)
     _, batched = _navigate_in_batches(DualNavConfig(), rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, cuts=200)
-    _, off = _navigate_in_batches(
-        DualNavConfig(stance_levels=False), rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, cuts=0
-    )
+    _, off = _navigate_in_batches(DualNavConfig(stance_levels=False), rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, cuts=0)
     np.testing.assert_array_equal(np.concatenate([o.pos_n_m for o in batched]), whole[0].pos_n_m)
     still = whole[0].stance
     rms = float(np.sqrt(np.mean((whole[0].pos_n_m[still, 2] - true_z[still]) ** 2)))
@@ -87,7 +84,7 @@ def test_demo_dual_imu_end_to_end_reports_a_board_mounted_differently(tmp_path: 
     out = tmp_path / "dual-demo.rrd"
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     proc = subprocess.run(
-        [sys.executable, "-m", "app", "demo", "--dual-imu", "--duration", "20", "--pace", "max",
+        [sys.executable, "-m", "footnav.app", "demo", "--dual-imu", "--duration", "20", "--pace", "max",
          "--save", str(out), "--sessions", str(tmp_path), "--board-lever-arm", "0", "0.014", "0"],
         capture_output=True, text=True, timeout=300, env=env, check=False,
     )  # fmt: skip
@@ -118,10 +115,10 @@ async def test_live_dual_imu_over_the_serial_path_follows_the_walk(tmp_path: Pat
     import asyncio
     import math
 
-    from app.config import defaults
-    from app.live import LiveOptions, live_session
-    from device.emulator.pty_server import PtyShoeServer
-    from pipeline.nav_types import NavBatch
+    from footnav.app.commands.live import LiveOptions, live_session
+    from footnav.app.config import defaults
+    from footnav.device.emulator.serving.pty import PtyShoeServer
+    from footnav.pipeline.nav_types import NavBatch
 
     rec = simulate_dual_imu("rectangle", seed=3)
     truth = rec.truth.imu1
@@ -154,11 +151,11 @@ async def test_live_dual_imu_over_the_serial_path_follows_the_walk(tmp_path: Pat
 
 
 def test_dual_imu_capture_replays_exactly_as_live(tmp_path: Path) -> None:
-    from app.config import defaults
-    from app.demo import DemoOptions, run_demo
-    from app.replay import ReplayOptions, run_replay
-    from pipeline.nav_types import NavBatch
-    from views.convert import concat_batches
+    from footnav.app.commands.demo import DemoOptions, run_demo
+    from footnav.app.commands.replay import ReplayOptions, run_replay
+    from footnav.app.config import defaults
+    from footnav.pipeline.nav_types import NavBatch
+    from footnav.views.convert import concat_batches
 
     live: list[NavBatch] = []
     replayed: list[NavBatch] = []

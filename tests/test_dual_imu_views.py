@@ -7,12 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from footnav.app.cli import main
+from footnav.app.experiments.dual_imu import METHODS, evaluate_run, view_of
+from footnav.views.dual_imu import AXES, save_dual_runs
+from footnav.views.paths import TIMELINE, DualPaths
 from rerun.chunk import RrdReader
-
-from app.cli import main
-from app.experiments.dual_imu import METHODS, evaluate_run, view_of
-from views.dual_imu import AXES, save_dual_runs
-from views.paths import TIMELINE, DualPaths
 
 
 def _rows(path: Path, entity: str) -> int:

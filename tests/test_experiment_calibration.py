@@ -4,10 +4,9 @@ without the calibration in one run; calibrated navigation must be much closer to
 from __future__ import annotations
 
 import numpy as np
-
-from app.experiments.calibration import calibrate_emulated, compare_walk
-from device.emulator.icosahedron import Miscalibration
-from pipeline.calibration import TOLERANCE
+from footnav.app.experiments.calibration import calibrate_emulated, compare_walk
+from footnav.device.emulator.sensors.icosahedron import Miscalibration
+from footnav.pipeline.calibration.model import TOLERANCE
 
 
 def test_calibrated_walk_beats_the_uncalibrated_one_side_by_side() -> None:

@@ -13,13 +13,12 @@ import math
 
 import numpy as np
 import pytest
-
-from device.emulator.faults import FaultInjector, WireFaults, split_frames
-from device.emulator.pty_server import PtyShoeServer
-from device.framer import DataPacket, Framer
-from device.imu_packets import encode_packets
-from device.unit import LinkStats, OpenShoeUnit
-from pipeline.samples import ImuBatch
+from footnav.device.emulator.serving.faults import FaultInjector, WireFaults, split_frames
+from footnav.device.emulator.serving.pty import PtyShoeServer
+from footnav.device.protocol.framer import DataPacket, Framer
+from footnav.device.protocol.imu import encode_packets
+from footnav.device.unit import LinkStats, OpenShoeUnit
+from footnav.pipeline.samples import ImuBatch
 
 
 def _signals(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

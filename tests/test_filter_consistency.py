@@ -14,10 +14,10 @@ import dataclasses
 
 import numpy as np
 import pytest
+from footnav.device.emulator.sensors.imu_errors import IMU_GRADES
+from footnav.pipeline.navigation.profiles import UnitProfile, get_profile
 
 from benchmarks.consistency import GRADE, nees_per_second, profile_of_grade, summary, with_true_stances
-from device.emulator.imu_errors import IMU_GRADES
-from pipeline.profiles import UnitProfile, get_profile
 
 RUNS = 12
 DURATION_S = 60.0

@@ -1,4 +1,4 @@
-"""The compiled filter (``pipeline.eskf``) against the plain numpy reference in ``benchmarks/``.
+"""The compiled filter (``footnav.pipeline.navigation.eskf``) against the plain numpy reference in ``benchmarks/``.
 
 The reference multiplies full (15, 15) matrices and writes the Joseph form with ``np.linalg``; the
 compiled filter uses block-sparse propagation, rank-3 updates and one-triangle symmetry. On a walk
@@ -12,15 +12,14 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
-from device.emulator.gait import simulate_walk
-from device.emulator.imu_errors import corrupt
-from pipeline import eskf
-from pipeline.alignment import align_from_still
-from pipeline.detectors import DetectorParams, StreamingDetector
-from pipeline.navigator import filter_parameters, zupt_ratio
-from pipeline.profiles import get_profile
-from pipeline.saturation import clipped_rate_variance
+from footnav.device.emulator.motion.gait import simulate_walk
+from footnav.device.emulator.sensors.imu_errors import corrupt
+from footnav.pipeline.navigation import eskf
+from footnav.pipeline.navigation.alignment import align_from_still
+from footnav.pipeline.navigation.navigator import filter_parameters, zupt_ratio
+from footnav.pipeline.navigation.profiles import get_profile
+from footnav.pipeline.navigation.saturation import clipped_rate_variance
+from footnav.pipeline.stance.detectors import DetectorParams, StreamingDetector
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # benchmarks/ is not an installed package

@@ -6,12 +6,11 @@ import math
 
 import numpy as np
 import pytest
-
-from pipeline import eskf
-from pipeline.alignment import align_from_still
-from pipeline.errors import InputFormatError
-from pipeline.navigator import NO_CLIPPED_RATES, NavConfig, navigate
-from pipeline.quaternion import quat_from_euler_zyx, quat_to_mat, yaw_of
+from footnav.pipeline.errors import InputFormatError
+from footnav.pipeline.navigation import eskf
+from footnav.pipeline.navigation.alignment import align_from_still
+from footnav.pipeline.navigation.navigator import NO_CLIPPED_RATES, NavConfig, navigate
+from footnav.pipeline.navigation.quaternion import quat_from_euler_zyx, quat_to_mat, yaw_of
 
 RATE_HZ = 1000.0
 
@@ -61,8 +60,8 @@ def test_accelerometer_bias_along_gravity_is_estimated_against_the_configured_gr
     """At rest the accelerometer reads gravity plus its bias: against a known gravity (standard by
     default, ``NavConfig.gravity_mps2``) the zero-velocity updates see the bias along gravity and the
     filter estimates it; taking |f| at rest for gravity (0) hides it in g, and the bias state stays at 0."""
-    from pipeline.navigator import Navigator
-    from pipeline.samples import ImuBatch
+    from footnav.pipeline.navigation.navigator import Navigator
+    from footnav.pipeline.samples import ImuBatch
 
     t, acc, gyr = _still(10_000, 0.3, -0.2, np.zeros(3))
     mat_nb = quat_to_mat(quat_from_euler_zyx(0.3, -0.2, 0.0))
@@ -87,8 +86,8 @@ def test_gyro_bias_is_tracked_after_alignment() -> None:
     t, acc, gyr = _still(105_000, 0.0, 0.0, np.zeros(3))
     step = np.radians([0.0, 0.0, 0.2])
     gyr[5000:] += step
-    from pipeline.navigator import Navigator
-    from pipeline.samples import ImuBatch
+    from footnav.pipeline.navigation.navigator import Navigator
+    from footnav.pipeline.samples import ImuBatch
 
     nav = Navigator(NavConfig(), RATE_HZ)
     n = t.size
@@ -100,10 +99,10 @@ def test_gyro_bias_is_tracked_after_alignment() -> None:
 
 def test_slow_turn_of_a_still_foot_is_rotation_not_gyro_bias() -> None:
     """A foot that stays still but turns slowly (a pivot, 0.8 °/s for 3 s) is turned, not taken for a
-    gyro bias: the zero-rate gate tests the rate against the gyroscope's noise (``pipeline.eskf``).
+    gyro bias: the zero-rate gate tests the rate against the gyroscope's noise (``footnav.pipeline.navigation.eskf``).
     With the update's larger noise in the gate (before), the bias estimate still held 0.24 °/s of it 4 s later."""
-    from pipeline.navigator import Navigator
-    from pipeline.samples import ImuBatch
+    from footnav.pipeline.navigation.navigator import Navigator
+    from footnav.pipeline.samples import ImuBatch
 
     t, acc, gyr = _still(10_000, 0.0, 0.0, np.zeros(3))
     turn = slice(3000, 6000)
@@ -162,8 +161,8 @@ def test_no_still_period_means_no_estimates() -> None:
 def test_strapdown_step_is_second_order_on_exact_signals() -> None:
     """The filter's step with no updates integrates the emulator's noise-free signals from the true
     initial state with a global error ∝ dt²: four times the rate, at least eight times less error
-    (16 in theory; pipeline.eskf docstring)."""
-    from device.emulator.gait import simulate_walk
+    (16 in theory; footnav.pipeline.navigation.eskf docstring)."""
+    from footnav.device.emulator.motion.gait import simulate_walk
 
     errors = []
     for rate_hz in (250.0, 1000.0):
@@ -189,8 +188,8 @@ def test_strapdown_step_is_second_order_on_exact_signals() -> None:
 def _moving_filter(speed_mps: float):  # type: ignore[no-untyped-def]
     """A filter aligned on a still unit that the nominal state says moves at ``speed_mps`` along x,
     its velocity known to 1 cm/s: one still sample follows."""
-    from pipeline.navigator import filter_parameters, initial_error_sigmas
-    from pipeline.profiles import get_profile
+    from footnav.pipeline.navigation.navigator import filter_parameters, initial_error_sigmas
+    from footnav.pipeline.navigation.profiles import get_profile
 
     prof = get_profile("mpu6500x4")
     _, acc, gyr = _still(1, 0.0, 0.0, np.zeros(3))
@@ -205,7 +204,8 @@ def _moving_filter(speed_mps: float):  # type: ignore[no-untyped-def]
 @pytest.mark.parametrize(("ratio", "applied"), [(0.9, False), (np.nan, False), (0.5, True), (0.1, True)])
 def test_zero_velocity_sample_of_a_moving_foot(ratio: float, applied: bool) -> None:
     """A stance sample the detector is unsure of (T/γ above 0.5, or from another source) while the filter
-    knows the foot moves at 1.9 m/s (the PyShoe mid-swing "stance" of ``pipeline.eskf``) is skipped and
+    knows the foot moves at 1.9 m/s (the PyShoe mid-swing "stance" of ``footnav.pipeline.navigation.eskf``) is
+    skipped and
     counted; one the detector is sure of is applied however far the filter's velocity is from zero."""
     x, P, acc, gyr, par = _moving_filter(1.9)
     counters = np.zeros(eskf.N_CNT, dtype=np.int64)
@@ -242,8 +242,8 @@ def _standing_run(par: np.ndarray, first_still_s: float, pause_s: float, stand_s
     gyr[n1 + n2 :] += turn_radps
     stance = np.ones(n, dtype=np.bool_)
     stance[n1 : n1 + n2] = False
-    from pipeline.navigator import initial_error_sigmas
-    from pipeline.profiles import get_profile
+    from footnav.pipeline.navigation.navigator import initial_error_sigmas
+    from footnav.pipeline.navigation.profiles import get_profile
 
     prof = get_profile("mpu6500x4")
     x = np.zeros(16)
@@ -263,11 +263,11 @@ def _standing_run(par: np.ndarray, first_still_s: float, pause_s: float, stand_s
 
 def test_a_standing_foot_may_turn_about_the_vertical() -> None:
     """After 2 s of a stance that is not the first, the zero-rate update admits a turn about the
-    vertical (``pipeline.eskf``): a slow 0.3 °/s turn read there moves the vertical bias estimate far
+    vertical (``footnav.pipeline.navigation.eskf``): a slow 0.3 °/s turn read there moves the vertical bias estimate far
     less than a full-strength update would, while the same reading about a horizontal axis (which the
     floor holds) is learnt as before; the still start and a stance's first 2 s are untouched."""
-    from pipeline.navigator import STANDING_AFTER_S, filter_parameters
-    from pipeline.profiles import get_profile
+    from footnav.pipeline.navigation.navigator import STANDING_AFTER_S, filter_parameters
+    from footnav.pipeline.navigation.profiles import get_profile
 
     par = filter_parameters(get_profile("mpu6500x4"), RATE_HZ, 9.80665, 0.05)
     plain = par.copy()

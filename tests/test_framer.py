@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import os
 
+from footnav.device.protocol.commands import checksum16, data_packet, device_ack
+from footnav.device.protocol.framer import DataPacket, DeviceAck, Frame, Framer
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from device.framer import DataPacket, DeviceAck, Frame, Framer
-from device.protocol import checksum16, data_packet, device_ack
 
 HEADERS = (0xAA, 0xA0)
 
@@ -97,9 +96,7 @@ def _split(data: bytes, cuts: list[int]) -> list[bytes]:
 
 
 @settings(max_examples=int(os.environ.get("FOOTNAV_FUZZ_EXAMPLES", "300")), deadline=None)
-@given(
-    items=pieces, cuts=st.lists(st.integers(0, 10_000), max_size=20), lengths=st.sampled_from([None, {28}])
-)
+@given(items=pieces, cuts=st.lists(st.integers(0, 10_000), max_size=20), lengths=st.sampled_from([None, {28}]))
 def test_any_stream_any_split(items: list[Frame | bytes], cuts: list[int], lengths: set[int] | None) -> None:
     """Never crashes; output is independent of how the bytes are cut; every frame is valid and real."""
     data = _stream(items)

@@ -21,14 +21,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.io
+from footnav.device.files.capture import CaptureWriter, UnitHeader, iter_capture
+from footnav.device.files.recordings import Recording, load_recording
+from footnav.pipeline.errors import FootnavError, InputFormatError
+from footnav.pipeline.navigation.navigator import NavConfig, navigate
+from footnav.pipeline.navigation.profiles import get_profile
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
-from device.capture import CaptureWriter, UnitHeader, iter_capture
-from pipeline.errors import FootnavError, InputFormatError
-from pipeline.loaders import Recording, load_recording
-from pipeline.navigator import NavConfig, navigate
-from pipeline.profiles import get_profile
 
 EXAMPLES = int(os.environ.get("FOOTNAV_FUZZ_EXAMPLES", "40"))
 # the suite's short run is the same every time (a CI run must not depend on luck); a long run explores

@@ -6,10 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from footnav.device.emulator.motion import paths
+from footnav.device.emulator.motion.gait import GRAVITY_MPS2, GaitTruth, simulate_walk
 from numpy.typing import NDArray
-
-from device.emulator import paths
-from device.emulator.gait import GRAVITY_MPS2, GaitTruth, simulate_walk
 
 F64 = NDArray[np.float64]
 

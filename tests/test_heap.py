@@ -6,8 +6,7 @@ import asyncio
 import threading
 
 import pytest
-
-from app import heap
+from footnav.app import heap
 
 pytestmark = pytest.mark.skipif(heap._libc() is None, reason="the C library is not glibc: nothing to trim")
 

@@ -1,15 +1,14 @@
-"""Zero-velocity detection with ToF height (pipeline.height_detector): unit behaviour and, on an
+"""Zero-velocity detection with ToF height (footnav.pipeline.stance.height_detector): unit behaviour and, on an
 emulated walk, its stance flags against the truth alone and combined with the inertial detector."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from app.experiments import tof as exp
-from pipeline.height_detector import HeightDetectorParams, HeightStanceDetector
-from pipeline.navigator import navigate
-from pipeline.tof_aiding import DEFAULT_DIR_B, DEFAULT_LEVER_B_M, TofConfig
+from footnav.app.experiments import tof as exp
+from footnav.pipeline.aiding.tof import DEFAULT_DIR_B, DEFAULT_LEVER_B_M, TofConfig
+from footnav.pipeline.navigation.navigator import navigate
+from footnav.pipeline.stance.height_detector import HeightDetectorParams, HeightStanceDetector
 
 
 def _detector(mode: str = "height") -> HeightStanceDetector:

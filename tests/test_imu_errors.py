@@ -6,8 +6,7 @@ import math
 
 import numpy as np
 import pytest
-
-from device.emulator.imu_errors import AXIS_ERRORS, IMU_GRADES, ImuGrade, corrupt, gauss_markov
+from footnav.device.emulator.sensors.imu_errors import AXIS_ERRORS, IMU_GRADES, ImuGrade, corrupt, gauss_markov
 
 NOISY_GRADES = [name for name in IMU_GRADES if name != "ideal"]
 
@@ -33,9 +32,7 @@ def test_measurement_is_truth_plus_bias_plus_noise() -> None:
     truth_acc = rng.normal(size=(5000, 3))
     truth_gyr = rng.normal(size=(5000, 3))
     acc, gyr, applied = corrupt(truth_acc, truth_gyr, 1000.0, "mpu6500x4", seed=2)
-    np.testing.assert_allclose(
-        acc, truth_acc + applied.acc_bias_b_mps2 + applied.acc_noise_b_mps2, rtol=0, atol=1e-15
-    )
+    np.testing.assert_allclose(acc, truth_acc + applied.acc_bias_b_mps2 + applied.acc_noise_b_mps2, rtol=0, atol=1e-15)
     np.testing.assert_allclose(
         gyr, truth_gyr + applied.gyr_bias_b_radps + applied.gyr_noise_b_radps, rtol=0, atol=1e-15
     )

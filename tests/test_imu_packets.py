@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from device.framer import DataPacket, Framer
-from device.imu_packets import (
+from footnav.device.protocol.commands import data_packet
+from footnav.device.protocol.framer import DataPacket, Framer
+from footnav.device.protocol.imu import (
     PACKET_LEN,
     TICK_HZ,
     CounterTracker,
@@ -15,7 +15,6 @@ from device.imu_packets import (
     encode_packets,
     seconds_to_ticks,
 )
-from device.protocol import data_packet
 
 
 def _samples(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:

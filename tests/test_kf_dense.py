@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-
-from pipeline import kf_dense
+from footnav.pipeline.dual_imu import dense_kf as kf_dense
 
 
 def _spd(n: int, rng: np.random.Generator) -> np.ndarray:

@@ -13,14 +13,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from device import protocol
-from device.emulator.pty_server import DEFAULT_TICK0, PtyShoeServer
-from device.imu_packets import encode_packets
-from device.links import LinkEvent, LinkGap, ReconnectingLink, backoff_s
-from device.unit import OpenShoeUnit
-from pipeline.errors import DeviceError
-from pipeline.samples import ImuBatch
+from footnav.device.emulator.serving.pty import DEFAULT_TICK0, PtyShoeServer
+from footnav.device.errors import DeviceError
+from footnav.device.links.reconnecting import LinkEvent, LinkGap, ReconnectingLink, backoff_s
+from footnav.device.protocol import commands as protocol
+from footnav.device.protocol.imu import encode_packets
+from footnav.device.unit import OpenShoeUnit
+from footnav.pipeline.samples import ImuBatch
 
 
 def synth(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

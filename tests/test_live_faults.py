@@ -17,14 +17,13 @@ from pathlib import Path
 import numpy as np
 import pyarrow.compute as pc
 import pytest
+from footnav.device.emulator.motion.gait import simulate_walk
+from footnav.device.emulator.serving.pty import DEFAULT_TICK0, PtyShoeServer
+from footnav.device.files.capture import iter_capture
+from footnav.device.protocol import commands as protocol
+from footnav.device.protocol.framer import DataPacket, Framer
 from rerun.chunk import RrdReader
 from rerun.error_utils import RerunWarning
-
-from device import protocol
-from device.capture import iter_capture
-from device.emulator.gait import simulate_walk
-from device.emulator.pty_server import DEFAULT_TICK0, PtyShoeServer
-from device.framer import DataPacket, Framer
 
 
 def plug(path: Path, server: PtyShoeServer) -> None:
@@ -56,7 +55,7 @@ def test_live_session_survives_unplug_and_replug(tmp_path: Path) -> None:
     rrd = tmp_path / "live.rrd"
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "app", "live", "--port", str(port), "--no-viewer", "--save", str(rrd),
+        [sys.executable, "-m", "footnav.app", "live", "--port", str(port), "--no-viewer", "--save", str(rrd),
          "--sessions", str(tmp_path)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
     )  # fmt: skip

@@ -6,9 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from pipeline.errors import InputFormatError
-from pipeline.loaders import CsvMapping, detect_format, load_generic_csv, load_recording
+from footnav.device.files.recordings import CsvMapping, detect_format, load_generic_csv, load_recording
+from footnav.pipeline.errors import InputFormatError
 
 G0 = 9.80665
 
@@ -50,9 +49,7 @@ def test_openshoe_txt(shared_data: Path) -> None:
 def test_generic_csv_with_mapping(tmp_path: Path) -> None:
     n = 100
     t_ms = np.arange(n) * 5.0
-    rows = np.column_stack(
-        [t_ms, np.zeros(n), np.zeros(n), np.ones(n), np.full(n, 10.0), np.zeros(n), np.zeros(n)]
-    )
+    rows = np.column_stack([t_ms, np.zeros(n), np.zeros(n), np.ones(n), np.full(n, 10.0), np.zeros(n), np.zeros(n)])
     path = tmp_path / "walk.csv"
     np.savetxt(path, rows, delimiter=",", header="ts,ax,ay,az,wx,wy,wz", comments="")
     rec = load_generic_csv(path, CsvMapping.parse("time=ts:ms,acc=ax;ay;az:g,gyr=wx;wy;wz:deg/s,profile=gx3"))

@@ -10,9 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from footnav.device.files import mat_reader
 from scipy.io import savemat
-
-from pipeline import mat_reader
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -28,7 +27,7 @@ def _trial(path: Path, n: int = 400) -> Path:
 def test_a_script_without_a_main_guard_loads_a_mat_file(tmp_path: Path) -> None:
     script = tmp_path / "script.py"  # no `if __name__ == "__main__"`: a child must not re-run it
     script.write_text(
-        "import sys\nfrom pathlib import Path\nfrom pipeline.loaders import load_recording\n"
+        "import sys\nfrom pathlib import Path\nfrom footnav.device.files.recordings import load_recording\n"
         "print(load_recording(Path(sys.argv[1])).t_s.size)\n"
     )
     env = {**os.environ, "PYTHONPATH": str(ROOT)}

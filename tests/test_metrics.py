@@ -6,8 +6,7 @@ import math
 
 import numpy as np
 import pytest
-
-from pipeline.metrics import armse_2d_pyshoe, ate, loop_closure_error, path_length_m
+from footnav.pipeline.metrics import armse_2d_pyshoe, ate, loop_closure_error, path_length_m
 
 
 def _square(n: int = 400) -> np.ndarray:

@@ -12,27 +12,27 @@ import time
 
 import numpy as np
 import pytest
-
-from device import extensions, protocol, raw_imu
-from device.emulator.floors import floor_of
-from device.emulator.gait import GaitTruth, simulate_walk
-from device.emulator.pty_server import BT_UART_BUDGET_BPS, PtyShoeServer
-from device.emulator.scripts import (
+from footnav.device.emulator.motion.floors import floor_of
+from footnav.device.emulator.motion.gait import GaitTruth, simulate_walk
+from footnav.device.emulator.scripts import (
     InsTruth,
     baro_from_height,
     steps_from_truth,
     yaw_from_quat_wxyz,
 )
-from device.emulator.tof_sensors import tof_readings
-from device.extensions import BaroBatch, TofBatch
-from device.framer import DataPacket, DeviceAck, Framer
-from device.ins_states import InsStateBatch
-from device.raw_imu import RawImuBatch
-from device.serial_link import SerialLink
-from device.stepwise import StepBatch
-from device.unit import Batch, InsMode, NormalImuMode, OpenShoeUnit, RawImuMode, StepwiseMode
-from pipeline.errors import DeviceError, ProtocolError
-from pipeline.samples import ImuBatch
+from footnav.device.emulator.sensors.tof import tof_readings
+from footnav.device.emulator.serving.pty import BT_UART_BUDGET_BPS, PtyShoeServer
+from footnav.device.errors import DeviceError, ProtocolError
+from footnav.device.links.serial import SerialLink
+from footnav.device.protocol import commands as protocol
+from footnav.device.protocol import extensions, raw_imu
+from footnav.device.protocol.extensions import BaroBatch, TofBatch
+from footnav.device.protocol.framer import DataPacket, DeviceAck, Framer
+from footnav.device.protocol.ins_states import InsStateBatch
+from footnav.device.protocol.raw_imu import RawImuBatch
+from footnav.device.protocol.stepwise import StepBatch
+from footnav.device.unit import Batch, InsMode, NormalImuMode, OpenShoeUnit, RawImuMode, StepwiseMode
+from footnav.pipeline.samples import ImuBatch
 
 
 @pytest.fixture(scope="module")
@@ -40,9 +40,7 @@ def walk() -> GaitTruth:
     return simulate_walk("rectangle", 25.0, seed=1)
 
 
-def synth(
-    n: int, k: int = 4, seed: int = 0
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def synth(n: int, k: int = 4, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
     t = np.arange(n) / 1000.0
     acc = rng.normal(0, 5, (n, 3))
@@ -174,9 +172,7 @@ async def test_2015_unit_is_detected_by_its_start_ack() -> None:
 async def test_raw_imu_any_subset(mask: int, k: int) -> None:
     n = 1500
     t, acc, gyr, imu_acc, imu_gyr = synth(n, k=k)
-    with PtyShoeServer(
-        t, acc, gyr, speed=math.inf, imu_acc_b_mps2=imu_acc, imu_gyr_b_radps=imu_gyr
-    ) as server:
+    with PtyShoeServer(t, acc, gyr, speed=math.inf, imu_acc_b_mps2=imu_acc, imu_gyr_b_radps=imu_gyr) as server:
         async with await OpenShoeUnit.open_serial(server.port) as unit:
             await unit.start(RawImuMode(imu_mask=mask, rate_divider_log2=0))
             got = of(await gather(unit, RawImuBatch, n), RawImuBatch)
@@ -213,9 +209,7 @@ async def test_ins_states_in_footnav_frame(walk: GaitTruth) -> None:
 async def test_extension_states_interleave_with_the_imu_stream(walk: GaitTruth) -> None:
     tof = tof_readings(walk.t_s, walk.pos_n_m, walk.quat_nb_wxyz, floor_of("line"))
     baro = baro_from_height(walk.t_s, walk.pos_n_m[:, 2])
-    with PtyShoeServer(
-        walk.t_s, walk.acc_b_mps2, walk.gyr_b_radps, speed=math.inf, tof=tof, baro=baro
-    ) as server:
+    with PtyShoeServer(walk.t_s, walk.acc_b_mps2, walk.gyr_b_radps, speed=math.inf, tof=tof, baro=baro) as server:
         async with await OpenShoeUnit.open_serial(server.port) as unit:
             await unit.start(NormalImuMode(rate_divider_log2=3))
             await unit.enable_extensions(tof=True, baro=True)
@@ -248,7 +242,7 @@ async def test_unknown_packets_are_counted_and_logged_once(caplog: pytest.LogCap
             await unit.start(NormalImuMode())
             # Switch the ToF state on behind the unit's back: its packets are of no expected kind.
             await unit._send(protocol.Commands2015().output_state(extensions.STATE_TOF, 0x01))
-            with caplog.at_level(logging.WARNING, logger="device.unit"):
+            with caplog.at_level(logging.WARNING, logger="footnav.device.unit"):
                 got = await gather(unit, ImuBatch, 3000)
             await unit.stop()
             stats = unit.stats

@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import pytest
-
-from device import protocol
-from device.protocol import Command, CommandParser
-from pipeline.errors import ProtocolError
+from footnav.device.errors import ProtocolError
+from footnav.device.protocol import commands as protocol
+from footnav.device.protocol.commands import Command, CommandParser
 
 
 def h(text: str) -> bytes:

@@ -1,4 +1,4 @@
-"""Clipped gyroscope samples: found, reconstructed and marked (``pipeline.saturation``)."""
+"""Clipped gyroscope samples: found, reconstructed and marked (``footnav.pipeline.navigation.saturation``)."""
 
 from __future__ import annotations
 
@@ -7,9 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from pipeline.loaders import load_recording
-from pipeline.saturation import CLIPPED_RATE_SIGMA_SHARE, clipped_rate_variance, reconstruct_saturated_rates
+from footnav.device.files.recordings import load_recording
+from footnav.pipeline.navigation.saturation import (
+    CLIPPED_RATE_SIGMA_SHARE,
+    clipped_rate_variance,
+    reconstruct_saturated_rates,
+)
 
 
 def _swing_rates(rate_hz: float = 200.0) -> tuple[np.ndarray, np.ndarray]:

@@ -15,14 +15,13 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-
-from device.emulator.pty_server import PtyShoeServer
-from device.framer import DataPacket, Framer
-from device.imu_packets import TICK_HZ
-from device.serial_link import SerialLink
-from device.unit import OpenShoeUnit
-from pipeline.errors import DeviceError
-from pipeline.samples import ImuBatch
+from footnav.device.emulator.serving.pty import PtyShoeServer
+from footnav.device.errors import DeviceError
+from footnav.device.links.serial import SerialLink
+from footnav.device.protocol.framer import DataPacket, Framer
+from footnav.device.protocol.imu import TICK_HZ
+from footnav.device.unit import OpenShoeUnit
+from footnav.pipeline.samples import ImuBatch
 
 
 def synth(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

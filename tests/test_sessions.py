@@ -15,12 +15,11 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pytest
+from footnav.device.files.capture import read_capture_info
+from footnav.views.convert import step_onsets
+from footnav.views.outputs import open_session_views
+from footnav.views.sinks import LOOPBACK, viewer_binary
 from rerun.chunk import RrdReader
-
-from device.capture import read_capture_info
-from views.convert import step_onsets
-from views.outputs import open_session_views
-from views.sinks import LOOPBACK, viewer_binary
 
 LAVAPIPE_ICD = Path("/usr/share/vulkan/icd.d/lvp_icd.x86_64.json")
 
@@ -28,7 +27,12 @@ LAVAPIPE_ICD = Path("/usr/share/vulkan/icd.d/lvp_icd.x86_64.json")
 def _footnav(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     return subprocess.run(
-        [sys.executable, "-m", "app", *args], capture_output=True, text=True, timeout=timeout, env=env, check=False
+        [sys.executable, "-m", "footnav.app", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=env,
+        check=False,
     )
 
 
@@ -112,7 +116,7 @@ def test_recording_read_back_of_every_view(demo20: Path) -> None:
     assert last.shape[0] >= 50 and d.max() < 1e-5
     # link health and the detector threshold next to its statistic
     rate = _rows(store, "/plots/rate/foot")
-    # one point per batch at most every 0.5 s of device time (app.session.LinkHealth); at --pace max
+    # one point per batch at most every 0.5 s of device time (footnav.app.session.LinkHealth); at --pace max
     # the reader coalesces the emulator's backlog into batches whose size follows the machine's load
     # (14-26 points in 20 s measured here, 14 in a fresh-clone CI run), so the count is bounded
     # loosely and the spacing exactly

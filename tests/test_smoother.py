@@ -1,4 +1,4 @@
-"""The RTS smoother (``pipeline.smoother``): better than the causal filter, RTS properties, bad input."""
+"""The RTS smoother (``footnav.pipeline.smoothing.rts``): better than the causal filter, RTS properties, bad input."""
 
 from __future__ import annotations
 
@@ -7,16 +7,15 @@ from typing import Any
 
 import numpy as np
 import pytest
-
-from device.emulator.gait import simulate_walk
-from device.emulator.imu_errors import corrupt
-from pipeline import eskf
-from pipeline.navigator import NO_CLIPPED_RATES, NavConfig, Navigator, navigate, zupt_ratio
-from pipeline.profiles import get_profile
-from pipeline.quaternion import quat_from_euler_zyx, quat_to_mat
-from pipeline.samples import ImuBatch
-from pipeline.saturation import clipped_rate_variance
-from pipeline.smoother import _backward_pass, _storing_pass, smooth_recording
+from footnav.device.emulator.motion.gait import simulate_walk
+from footnav.device.emulator.sensors.imu_errors import corrupt
+from footnav.pipeline.navigation import eskf
+from footnav.pipeline.navigation.navigator import NO_CLIPPED_RATES, NavConfig, Navigator, navigate, zupt_ratio
+from footnav.pipeline.navigation.profiles import get_profile
+from footnav.pipeline.navigation.quaternion import quat_from_euler_zyx, quat_to_mat
+from footnav.pipeline.navigation.saturation import clipped_rate_variance
+from footnav.pipeline.samples import ImuBatch
+from footnav.pipeline.smoothing.rts import _backward_pass, _storing_pass, smooth_recording
 
 RATE_HZ = 1000.0
 CONFIG = NavConfig(profile=get_profile("mpu6500x4"))
@@ -40,7 +39,7 @@ def test_smoothed_walk_is_more_accurate(walk) -> None:  # type: ignore[no-untype
     truth, _, _, causal, _, smoothed, _ = walk
     rms_causal = _rms(causal.pos_n_m - truth.pos_n_m)
     rms_smoothed = _rms(smoothed.pos_n_m - truth.pos_n_m)
-    # Since the stance height constraint (pipeline.stance_levels) holds both on the floor (height
+    # Since the stance height constraint (footnav.pipeline.stance.levels) holds both on the floor (height
     # 0.3 mm RMS, causal and smoothed), the horizontal error decides: 7.3 against 7.2 mm (without the
     # constraint the smoother's height 2.6 against 3.5 mm made it 7.7 against 8.0 mm 3D)
     assert rms_smoothed < 1.03 * rms_causal and rms_smoothed < 0.008

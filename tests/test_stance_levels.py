@@ -1,4 +1,4 @@
-"""The stance height constraint (pipeline.stance_levels): level walks held on their floor, stairs kept.
+"""The stance height constraint (footnav.pipeline.stance.levels): level walks held on their floor, stairs kept.
 
 Emulated walks with the platform's unit (its gyroscope's datasheet scale and cross-axis errors,
 ``gyro-bias-calibrated``), whose inertial-only height drifts by tens of centimetres in a minute.
@@ -12,17 +12,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from device.emulator.gait import simulate_walk
-from device.emulator.imu_errors import corrupt
-from pipeline import eskf
-from pipeline.loaders import load_recording
-from pipeline.nav_types import NavBatch
-from pipeline.navigator import NavConfig, Navigator, navigate
-from pipeline.profiles import get_profile
-from pipeline.samples import ImuBatch
-from pipeline.smoother import smooth_recording
-from pipeline.stance_levels import (
+from footnav.device.emulator.motion.gait import simulate_walk
+from footnav.device.emulator.sensors.imu_errors import corrupt
+from footnav.device.files.recordings import load_recording
+from footnav.pipeline.nav_types import NavBatch
+from footnav.pipeline.navigation import eskf
+from footnav.pipeline.navigation.navigator import NavConfig, Navigator, navigate
+from footnav.pipeline.navigation.profiles import get_profile
+from footnav.pipeline.samples import ImuBatch
+from footnav.pipeline.smoothing.rts import smooth_recording
+from footnav.pipeline.stance.levels import (
     MAX_LEVELS,
     StanceLevelParams,
     StanceLevels,

@@ -1,4 +1,4 @@
-"""Live step-wise smoothing (``pipeline.step_smoother``): exact, batch-independent, bounded, accurate."""
+"""Live step-wise smoothing (``footnav.pipeline.smoothing.stepwise``): exact, batch-independent, bounded, accurate."""
 
 from __future__ import annotations
 
@@ -6,16 +6,15 @@ from typing import Any
 
 import numpy as np
 import pytest
-
-from device.emulator.gait import simulate_walk
-from device.emulator.imu_errors import corrupt
-from pipeline.nav_types import NavBatch, SmoothedSpan
-from pipeline.navigator import NavConfig, navigate
-from pipeline.profiles import get_profile
-from pipeline.samples import ImuBatch
-from pipeline.smoother import smooth_recording
-from pipeline.step_smoother import StepSmoothingNavigator, step_smooth_recording
-from pipeline.tof_aiding import RangeBatch
+from footnav.device.emulator.motion.gait import simulate_walk
+from footnav.device.emulator.sensors.imu_errors import corrupt
+from footnav.pipeline.aiding.tof import RangeBatch
+from footnav.pipeline.nav_types import NavBatch, SmoothedSpan
+from footnav.pipeline.navigation.navigator import NavConfig, navigate
+from footnav.pipeline.navigation.profiles import get_profile
+from footnav.pipeline.samples import ImuBatch
+from footnav.pipeline.smoothing.rts import smooth_recording
+from footnav.pipeline.smoothing.stepwise import StepSmoothingNavigator, step_smooth_recording
 
 RATE_HZ = 200.0
 CONFIG = NavConfig(profile=get_profile("mpu6500x4"))

@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-
-from device.emulator.gait import simulate_walk
-from pipeline.steps import accumulate_steps, segment_steps
+from footnav.device.emulator.motion.gait import simulate_walk
+from footnav.pipeline.gait.steps import accumulate_steps, segment_steps
 
 
 def _truth_cov(n: int) -> np.ndarray:

@@ -9,16 +9,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from app.config import defaults, load_config
-from app.demo import DemoOptions, demo_truth, run_demo
-from app.export import CLEARANCE_COLUMNS, EXPORT_COLUMNS, run_export
-from app.replay import ReplayOptions, run_replay
-from pipeline.errors import FootnavError
-from pipeline.nav_types import NavBatch
-from pipeline.swing_clearance import swing_clearance
-from pipeline.tof_aiding import TofConfig
-from views.convert import concat_batches
+from footnav.app.commands.demo import DemoOptions, demo_truth, run_demo
+from footnav.app.commands.export import CLEARANCE_COLUMNS, EXPORT_COLUMNS, run_export
+from footnav.app.commands.replay import ReplayOptions, run_replay
+from footnav.app.config import defaults, load_config
+from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.errors import FootnavError
+from footnav.pipeline.gait.tof_clearance import swing_clearance
+from footnav.pipeline.nav_types import NavBatch
+from footnav.views.convert import concat_batches
 
 
 def _collector() -> tuple[dict[str, list[NavBatch]], Callable[[str], Callable[[NavBatch], None]]]:

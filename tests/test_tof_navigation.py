@@ -8,15 +8,14 @@ import dataclasses
 
 import numpy as np
 import pytest
-
-from app.experiments import tof as exp
-from device.emulator.floors import floor_of
-from device.emulator.tof_sensors import TofSensorModel
-from pipeline.navigator import NavConfig, Navigator, navigate
-from pipeline.profiles import get_profile
-from pipeline.samples import ImuBatch
-from pipeline.swing_clearance import SwingClearanceTracker, swing_clearance
-from pipeline.tof_aiding import LEVEL_STATES, RangeBatch, RangeOutputs, TofAiding, TofConfig
+from footnav.app.experiments import tof as exp
+from footnav.device.emulator.motion.floors import floor_of
+from footnav.device.emulator.sensors.tof import TofSensorModel
+from footnav.pipeline.aiding.tof import LEVEL_STATES, RangeBatch, RangeOutputs, TofAiding, TofConfig
+from footnav.pipeline.gait.tof_clearance import SwingClearanceTracker, swing_clearance
+from footnav.pipeline.navigation.navigator import NavConfig, Navigator, navigate
+from footnav.pipeline.navigation.profiles import get_profile
+from footnav.pipeline.samples import ImuBatch
 
 
 @pytest.fixture(scope="module")
@@ -77,7 +76,7 @@ def test_stairs_clearance_within_1cm_live(stairs70: exp.Recording) -> None:
 
 
 def test_stairs_clearance_within_1cm_from_the_whole_swing(stairs70: exp.Recording) -> None:
-    """pipeline.swing_clearance: 0.86 cm on this walk (0.86-0.94 cm with seeds 1-8, either emulated unit)."""
+    """footnav.pipeline.gait.tof_clearance: 0.86 cm on this walk (0.86-0.94 cm with seeds 1-8, either emulated unit)."""
     _, tof = exp.compare(stairs70)
     assert tof.swing_clearance_rms_m <= 0.01
     assert tof.swing_clearance_rms_m < 0.8 * tof.clearance_rms_m
@@ -95,7 +94,7 @@ def test_stairs_clearance_near_step_edges_is_interpolated_and_learned(stairs70: 
 def test_stairs_vertical_error_5x_lower(seed: int) -> None:
     """6.7-21x with seeds 1-8 (0.33-1.32 cm against 2.5-21 cm): the treads are floor-level states of
     the filter, so what it learns later (the accelerometer bias at the landing's turn) corrects the
-    treads already placed (pipeline.tof_aiding). Placed once, at the state's height, they were
+    treads already placed (footnav.pipeline.aiding.tof). Placed once, at the state's height, they were
     1.3-27x (seed 3 worst: 1.91 cm against 2.54 cm)."""
     zupt, tof = exp.compare(exp.record("stairs", 70.0, seed=seed))
     assert zupt.z_stance_rms_m >= 5.0 * tof.z_stance_rms_m
@@ -298,7 +297,7 @@ def test_bad_input_on_stairs_whole_swing_clearance_is_no_worse_than_live(seed: i
 
 
 def test_experiment_command_prints_the_side_by_side_table(capsys: pytest.CaptureFixture[str]) -> None:
-    from app.cli import main
+    from footnav.app.cli import main
 
     assert main(["experiment", "tof", "--duration", "15"]) == 0
     out = capsys.readouterr().out.splitlines()
@@ -323,8 +322,15 @@ def test_whole_swing_clearance_passes_a_long_run_without_stance_through_at_once(
     r_t = np.arange(0.0, 8.0, 0.01) + 0.005
     hit = np.column_stack([np.interp(r_t, t, pos[:, 0]), np.zeros(r_t.size), np.where(r_t > 7.2, 0.02, 0.0)])
     ranges = RangeOutputs(
-        r_t, np.zeros(r_t.size, np.int64), np.zeros(r_t.size, np.uint8), np.full(r_t.size, 0.05),
-        np.zeros(r_t.size, np.int64), np.zeros(r_t.size), np.zeros(r_t.size), hit, np.zeros(r_t.size, bool),
+        r_t,
+        np.zeros(r_t.size, np.int64),
+        np.zeros(r_t.size, np.uint8),
+        np.full(r_t.size, 0.05),
+        np.zeros(r_t.size, np.int64),
+        np.zeros(r_t.size),
+        np.zeros(r_t.size),
+        hit,
+        np.zeros(r_t.size, bool),
     )
     tracker = SwingClearanceTracker(0.004)
     out_t, out_c = [], []

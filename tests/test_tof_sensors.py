@@ -1,4 +1,4 @@
-"""The emulated ToF sensors (device.emulator.tof_sensors) and the floor they range (floors)."""
+"""The emulated ToF sensors (footnav.device.emulator.sensors.tof) and the floor they range (floors)."""
 
 from __future__ import annotations
 
@@ -6,12 +6,11 @@ import math
 
 import numpy as np
 import pytest
-
-from device import extensions
-from device.emulator import paths
-from device.emulator.floors import floor_of
-from device.emulator.gait import simulate_walk
-from device.emulator.tof_sensors import TofMount, TofSensorModel, ray_cast, tof_readings
+from footnav.device.emulator.motion import paths
+from footnav.device.emulator.motion.floors import floor_of
+from footnav.device.emulator.motion.gait import simulate_walk
+from footnav.device.emulator.sensors.tof import TofMount, TofSensorModel, ray_cast, tof_readings
+from footnav.device.protocol import extensions
 
 
 def test_stair_floor_is_the_gait_models_floor_under_the_imu() -> None:

@@ -1,14 +1,13 @@
-"""The ToF height measurement (pipeline.tof_update): its Jacobian against finite differences, the
+"""The ToF height measurement (footnav.pipeline.aiding.tof_measurement): its Jacobian against finite differences, the
 scalar Joseph-form update against the textbook full-matrix one, and the gate's reasons."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from pipeline import tof_update as tu
-from pipeline.eskf import N_STATE
-from pipeline.quaternion import quat_from_rotvec, quat_mul
+from footnav.pipeline.aiding import tof_measurement as tu
+from footnav.pipeline.navigation.eskf import N_STATE
+from footnav.pipeline.navigation.quaternion import quat_from_rotvec, quat_mul
 
 
 def _state(rng: np.random.Generator) -> np.ndarray:

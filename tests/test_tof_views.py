@@ -8,20 +8,19 @@ from pathlib import Path
 import numpy as np
 import pyarrow.compute as pc
 import rerun as rr
+from footnav.app.commands.live import FOOT_START_OFFSET_M, offset_sink
+from footnav.app.experiments import tof as exp
+from footnav.device.emulator.scripts import baro_from_height
+from footnav.pipeline.aiding.baro import PressureBatch
+from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.gait.tof_clearance import swing_clearance
+from footnav.pipeline.nav_types import NavBatch
+from footnav.pipeline.navigation.navigator import NavConfig, Navigator
+from footnav.pipeline.samples import ImuBatch
+from footnav.views import convert
+from footnav.views.logger import RerunLogger
+from footnav.views.paths import TIMELINE, FootPaths
 from rerun.chunk import RrdReader
-
-from app.experiments import tof as exp
-from app.live import FOOT_START_OFFSET_M, offset_sink
-from device.emulator.scripts import baro_from_height
-from pipeline.baro import PressureBatch
-from pipeline.nav_types import NavBatch
-from pipeline.navigator import NavConfig, Navigator
-from pipeline.samples import ImuBatch
-from pipeline.swing_clearance import swing_clearance
-from pipeline.tof_aiding import TofConfig
-from views import convert
-from views.logger import RerunLogger
-from views.paths import TIMELINE, FootPaths
 
 
 def _values(store: object, entity: str) -> tuple[np.ndarray, np.ndarray]:
@@ -93,7 +92,8 @@ def test_tof_entities_round_trip_through_an_rrd(tmp_path: Path) -> None:
 
 
 def test_two_feet_display_offset_moves_the_floor_hits_with_the_track() -> None:
-    """app.live.offset_sink (two feet drawn side by side): the readings' floor hits are shifted with the
+    """footnav.app.commands.live.offset_sink (two feet drawn side by side): the readings' floor hits are shifted
+    with the
     positions, so the views' floor lookups along the way see both in one frame."""
     rec = exp.record("rectangle", 8.0, seed=1)
     t = rec.truth

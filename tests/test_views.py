@@ -13,15 +13,14 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pytest
 import rerun as rr
+from footnav.pipeline.nav_types import NavBatch
+from footnav.views import convert
+from footnav.views.blueprint import build_blueprint
+from footnav.views.logger import DEFAULT_ELLIPSOID_EVERY, RerunLogger
+from footnav.views.paths import EVENTS, TIMELINE, FootPaths
+from footnav.views.sinks import choose_sinks, has_display
 from numpy.typing import NDArray
 from rerun.chunk import RrdReader
-
-from pipeline.nav_types import NavBatch
-from views import convert
-from views.blueprint import build_blueprint
-from views.logger import DEFAULT_ELLIPSOID_EVERY, RerunLogger
-from views.paths import EVENTS, TIMELINE, FootPaths
-from views.sinks import choose_sinks, has_display
 
 RATE_HZ = 1000
 DURATION_S = 60.0
@@ -155,22 +154,15 @@ def test_nav_arrays_shapes() -> None:
     assert arr.quat_xyzw.shape == (50, 4) and arr.ellipsoids()[1].shape == (50, 4)
     assert arr.pos_sigma.shape == (50, 4) and arr.detector.shape == (50, 2)
     np.testing.assert_array_equal(arr.class_ids, nav.stance.astype(np.uint16))
-    cols = {
-        path: (index, c) for path, index, c in convert.nav_columns(arr, FootPaths("left"), ellipsoid_every=1)
-    }
+    cols = {path: (index, c) for path, index, c in convert.nav_columns(arr, FootPaths("left"), ellipsoid_every=1)}
     assert set(cols) >= {"world/left/track", "world/left/pose", "plots/stance/left", "world/left/cov"}
     # Decimation phase follows the running sample index: samples 20, 30, 40 of a batch starting at 13.
-    cov = {
-        path: (i, c)
-        for path, i, c in convert.nav_columns(arr, FootPaths(), ellipsoid_every=10, first_index=13)
-    }
+    cov = {path: (i, c) for path, i, c in convert.nav_columns(arr, FootPaths(), ellipsoid_every=10, first_index=13)}
     index, cov_cols = cov["world/foot/cov"]
     np.testing.assert_allclose(np.asarray(index.as_arrow_array()).astype(np.int64) / 1e9, nav.t_s[7::10])
     half = {str(c.component_descriptor()): c.as_arrow_array() for c in cov_cols}["Ellipsoids3D:half_sizes"]
     np.testing.assert_allclose(np.array(half.to_pylist())[:, 0, :], arr.ellipsoids()[0][7::10], rtol=1e-6)
-    assert "world/foot/cov" not in {
-        path for path, _, _ in convert.nav_columns(arr, FootPaths(), ellipsoid_every=0)
-    }
+    assert "world/foot/cov" not in {path for path, _, _ in convert.nav_columns(arr, FootPaths(), ellipsoid_every=0)}
 
 
 # ---------------------------------------------------------------- logger.py end to end
@@ -181,9 +173,7 @@ def flat(tbl: pa.Table, col: str) -> NDArray[np.float64]:
 
 
 def rows(tbl: pa.Table, col: str, width: int) -> NDArray[np.float64]:
-    return np.asarray(pc.list_flatten(pc.list_flatten(tbl[col])).to_numpy(zero_copy_only=False)).reshape(
-        -1, width
-    )
+    return np.asarray(pc.list_flatten(pc.list_flatten(tbl[col])).to_numpy(zero_copy_only=False)).reshape(-1, width)
 
 
 @pytest.fixture(scope="module")
@@ -234,15 +224,11 @@ def test_logger_writes_every_sample(walk_rrd: tuple[Path, NavBatch, RerunLogger,
     ).to_arrow_table()
     t_s = pc.divide(pc.cast(tbl[TIMELINE], pa.int64()), 1e9).to_numpy()
     np.testing.assert_allclose(t_s, nav.t_s, atol=1e-9)
-    np.testing.assert_allclose(
-        rows(tbl, f"/{p.track}:Points3D:positions", 3), nav.pos_n_m, rtol=1e-6, atol=1e-6
-    )
+    np.testing.assert_allclose(rows(tbl, f"/{p.track}:Points3D:positions", 3), nav.pos_n_m, rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(rows(tbl, f"/{p.pose}:Transform3D:quaternion", 4),
                                convert.quat_wxyz_to_xyzw(nav.quat_nb_wxyz), atol=1e-6)  # fmt: skip
     np.testing.assert_array_equal(flat(tbl, f"/{p.stance}:Scalars:scalars").astype(bool), nav.stance)
-    np.testing.assert_allclose(
-        flat(tbl, f"/{p.clearance}:Scalars:scalars"), nav.clearance_m, rtol=0, atol=1e-12
-    )
+    np.testing.assert_allclose(flat(tbl, f"/{p.clearance}:Scalars:scalars"), nav.clearance_m, rtol=0, atol=1e-12)
     np.testing.assert_allclose(
         flat(tbl, f"/{p.pos_sigma}:Scalars:scalars").reshape(-1, 4), convert.pos_sigmas(nav.pos_cov_n_m2)
     )
@@ -266,9 +252,7 @@ def test_logger_ellipsoids_are_decimated_and_match_covariance(
     back = np.einsum("nij,nj,nkj->nik", r, half**2, r)
     scale = convert.DEFAULT_SIGMA_SCALE**2
     np.testing.assert_allclose(back, scale * nav.pos_cov_n_m2[::every], rtol=1e-4, atol=1e-9)
-    np.testing.assert_allclose(
-        rows(tbl, f"/{p.cov}:Ellipsoids3D:centers", 3), nav.pos_n_m[::every], atol=1e-6
-    )
+    np.testing.assert_allclose(rows(tbl, f"/{p.cov}:Ellipsoids3D:centers", 3), nav.pos_n_m[::every], atol=1e-6)
 
 
 def test_logger_recording_identity_blueprint_and_events(

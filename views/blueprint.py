@@ -26,8 +26,7 @@ from typing import Any
 
 import rerun as rr
 import rerun.blueprint as rrb
-
-from views.paths import (
+from footnav.views.paths import (
     EVENTS,
     FLOOR,
     GAIT,
@@ -55,7 +54,7 @@ SWING_RGB = (255, 140, 0)
 STANCE_RGB = (0, 160, 255)
 TRUTH_RGB = (150, 150, 150)
 SMOOTHED_RGB = (150, 70, 210)
-"""The step-smoothed track and clearance (``pipeline.step_smoother``)."""
+"""The step-smoothed track and clearance (``footnav.pipeline.smoothing.stepwise``)."""
 TOF_RGB = ((0, 170, 120), (150, 90, 200), (200, 150, 0))
 """Colours of the three ToF sensors' measured heights (toe, mid-foot, heel)."""
 COV_RGBA = (255, 200, 0, 110)
@@ -99,9 +98,9 @@ def build_blueprint(
     """The default blueprint for a session with the given feet.
 
     Args:
-        feet: foot names (see :class:`views.paths.FootPaths`); the camera frames the whole scene.
+        feet: foot names (see :class:`footnav.views.paths.FootPaths`); the camera frames the whole scene.
         plot_window_s: width of the scrolling clearance/stance window, s.
-        dual_runs: dual-IMU boards in the session (:class:`views.paths.DualPaths`): their IMU tracks
+        dual_runs: dual-IMU boards in the session (:class:`footnav.views.paths.DualPaths`): their IMU tracks
             are drawn as trails and their constraint residuals get a plot of their own.
     """
     paths = [FootPaths(f) for f in feet]

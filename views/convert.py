@@ -1,4 +1,4 @@
-"""Pure conversions from :class:`pipeline.nav_types.NavBatch` to Rerun columns.
+"""Pure conversions from :class:`footnav.pipeline.nav_types.NavBatch` to Rerun columns.
 
 The numeric part (:func:`nav_arrays`) is plain numpy and testable without Rerun; :func:`nav_columns`
 wraps it into ``(entity_path, columns)`` pairs for ``RecordingStream.send_columns``, all sharing the
@@ -15,11 +15,10 @@ from typing import TypeVar
 
 import numpy as np
 import rerun as rr
+from footnav.pipeline.aiding.tof_measurement import USED as TOF_USED
+from footnav.pipeline.nav_types import NavBatch, SmoothedSpan, concat_if_all
+from footnav.views.paths import TIMELINE, FootPaths
 from numpy.typing import NDArray
-
-from pipeline.nav_types import NavBatch, SmoothedSpan, concat_if_all
-from pipeline.tof_update import USED as TOF_USED
-from views.paths import TIMELINE, FootPaths
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -376,7 +375,7 @@ def tof_columns(nav: NavBatch, paths: FootPaths, totals: NDArray[np.int64]) -> l
 
 
 def smoothed_columns(span: SmoothedSpan, paths: FootPaths, *, every: int = 1) -> list[SendColumns]:
-    """The step-smoothed track and its clearance (``pipeline.step_smoother``) at the samples' own
+    """The step-smoothed track and its clearance (``footnav.pipeline.smoothing.stepwise``) at the samples' own
     times, of the samples whose index (``span.first_sample`` + row) is a multiple of ``every`` (so
     decimation does not depend on where steps end); empty when there are none."""
     sl = slice((-span.first_sample) % every, None, every)

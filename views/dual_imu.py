@@ -16,10 +16,9 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+from footnav.views.convert import time_column
+from footnav.views.paths import TIMELINE, DualPaths
 from numpy.typing import NDArray
-
-from views.convert import time_column
-from views.paths import TIMELINE, DualPaths
 
 F64 = NDArray[np.float64]
 

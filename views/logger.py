@@ -25,16 +25,15 @@ from types import TracebackType
 
 import numpy as np
 import rerun as rr
+from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.gait.tof_clearance import SwingClearanceTracker
+from footnav.pipeline.nav_types import NavBatch
+from footnav.views import convert
+from footnav.views.blueprint import build_blueprint, floor_patch, static_setup
+from footnav.views.dual_imu import DualRunView, dual_columns, static_styles
+from footnav.views.paths import DEFAULT_FOOT, EVENTS, DualPaths, FootPaths
 from numpy.typing import NDArray
 from rerun.sinks import LogSinkLike
-
-from pipeline.nav_types import NavBatch
-from pipeline.swing_clearance import SwingClearanceTracker
-from pipeline.tof_aiding import TofConfig
-from views import convert
-from views.blueprint import build_blueprint, floor_patch, static_setup
-from views.dual_imu import DualRunView, dual_columns, static_styles
-from views.paths import DEFAULT_FOOT, EVENTS, DualPaths, FootPaths
 
 log = logging.getLogger(__name__)
 
@@ -164,7 +163,7 @@ class RerunLogger:
     """Logs NavBatches to Rerun sinks from one background thread.
 
     Args:
-        sinks: where the recording goes (see :func:`views.sinks.choose_sinks`); at least one.
+        sinks: where the recording goes (see :func:`footnav.views.sinks.choose_sinks`); at least one.
         recording_id: one id per walking session; files and viewers merge streams with equal ids.
         feet: foot names that will be logged (sets up blueprint and static styling).
         sigma_scale: covariance ellipsoids are drawn at this many σ.
@@ -265,15 +264,13 @@ class RerunLogger:
             self._queue.put(_Event(text, level, t_s))
 
     def log_dual(self, view: DualRunView, *, run: str) -> None:
-        """Queue a dual-IMU board's tracks and constraint residuals (:mod:`views.dual_imu`); not
+        """Queue a dual-IMU board's tracks and constraint residuals (:mod:`footnav.views.dual_imu`); not
         counted against the sample budget (a tenth of the tracks' points and a few residual rows)."""
         with self._lock:
             if not self._closed:
                 self._queue.put(_Dual(run, view))
 
-    def log_truth(
-        self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT
-    ) -> None:
+    def log_truth(self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT) -> None:
         """Log a ground-truth track: positions (n, 3), m, at device times (n,), s. Never blocks."""
         if foot not in self._paths:
             raise ValueError(f"foot {foot!r} was not declared; this logger has feet={self.feet}")
@@ -441,9 +438,7 @@ class RerunLogger:
             arrays, paths, ellipsoid_every=self._ellipsoid_every, first_index=first, series_every=self._series_every
         )
         onsets = convert.step_onsets(nav.stance, self._last_stance[foot])
-        columns_list += convert.step_columns(
-            arrays, nav.pos_cov_n_m2, onsets, paths, sigma_scale=self._sigma_scale
-        )
+        columns_list += convert.step_columns(arrays, nav.pos_cov_n_m2, onsets, paths, sigma_scale=self._sigma_scale)
         columns_list += convert.tof_columns(nav, paths, self._tof_totals.setdefault(foot, np.zeros(3, np.int64)))
         if nav.smoothed is not None:
             columns_list += convert.smoothed_columns(nav.smoothed, paths, every=SMOOTHED_EVERY)
@@ -485,9 +480,7 @@ class RerunLogger:
                 paths.rate, indexes=[index], columns=rr.Scalars.columns(scalars=[i.rate_hz for i in items])
             )
             errors = np.array([[i.lost_packets, i.reconnects] for i in items], dtype=np.float64)
-            self.recording.send_columns(
-                paths.link_errors, indexes=[index], columns=rr.Scalars.columns(scalars=errors)
-            )
+            self.recording.send_columns(paths.link_errors, indexes=[index], columns=rr.Scalars.columns(scalars=errors))
 
     def _send_lines(self, final: bool) -> None:
         """Re-log each foot's decimated track line if it grew and ≥ LINE_PERIOD_S passed (device and wall)."""

@@ -1,6 +1,6 @@
 """A session's Rerun outputs — native viewer, web viewer, .rrd file — each with its own logger thread.
 
-Why one :class:`~views.logger.RerunLogger` per output rather than one recording stream with several
+Why one :class:`~footnav.views.logger.RerunLogger` per output rather than one recording stream with several
 sinks: a gRPC sink whose viewer went away blocks every log call of its stream (rerun-0.41.md, section
 5), which would stop the file too. Separate streams with the same ``recording_id`` keep the file
 writing when a viewer dies; the dead viewer's logger is dropped with a one-line notice, and the
@@ -19,13 +19,11 @@ from pathlib import Path
 
 import numpy as np
 import rerun as rr
-from numpy.typing import NDArray
-
-from pipeline.nav_types import NavBatch
-from views.dual_imu import DualRunView
-from views.logger import FILE_FLUSH_PERIOD_S, FLUSH_PERIOD_S, RerunLogger
-from views.paths import DEFAULT_FOOT
-from views.sinks import (
+from footnav.pipeline.nav_types import NavBatch
+from footnav.views.dual_imu import DualRunView
+from footnav.views.logger import FILE_FLUSH_PERIOD_S, FLUSH_PERIOD_S, RerunLogger
+from footnav.views.paths import DEFAULT_FOOT
+from footnav.views.sinks import (
     ViewerStartError,
     check_writable,
     default_save_path,
@@ -33,6 +31,7 @@ from views.sinks import (
     serve_web_viewer,
     spawn_viewer,
 )
+from numpy.typing import NDArray
 
 log = logging.getLogger(__name__)
 
@@ -130,9 +129,7 @@ class SessionViews:
         for out in self.live:
             out.logger.log_event(text, level=level, t_s=t_s)
 
-    def log_truth(
-        self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT
-    ) -> None:
+    def log_truth(self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT) -> None:
         for out in self.live:
             out.logger.log_truth(pos_n_m, t_s=t_s, foot=foot)
 
@@ -145,9 +142,7 @@ class SessionViews:
         self, *, foot: str = DEFAULT_FOOT, t_s: float, rate_hz: float, lost_packets: int, reconnects: int = 0
     ) -> None:
         for out in self.live:
-            out.logger.log_link(
-                foot=foot, t_s=t_s, rate_hz=rate_hz, lost_packets=lost_packets, reconnects=reconnects
-            )
+            out.logger.log_link(foot=foot, t_s=t_s, rate_hz=rate_hz, lost_packets=lost_packets, reconnects=reconnects)
 
     def close(self) -> list[str]:
         """Close every live output (file footers written); returns notes on what did not close cleanly."""

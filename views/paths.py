@@ -95,7 +95,7 @@ class FootPaths:
     @property
     def smoothed(self) -> str:
         """IMU positions smoothed step by step (Points3D, every 10th sample), logged at their own
-        times once their step has ended (``pipeline.step_smoother``)."""
+        times once their step has ended (``footnav.pipeline.smoothing.stepwise``)."""
         return f"{self.root}/smoothed"
 
     @property
@@ -166,7 +166,7 @@ class FootPaths:
 
     @property
     def swing_clearance(self) -> str:
-        """Foot clearance from each swing's floor hits past and future (``pipeline.swing_clearance``),
+        """Foot clearance from each swing's floor hits past and future (``footnav.pipeline.gait.tof_clearance``),
         m, logged each swing about 0.25 s after it ends, in the clearance view."""
         return f"{self.clearance}/swing"
 

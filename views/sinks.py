@@ -18,9 +18,8 @@ from datetime import datetime
 from pathlib import Path
 
 import rerun as rr
+from footnav.pipeline.errors import FootnavError
 from rerun.sinks import LogSinkLike
-
-from pipeline.errors import FootnavError
 
 LOOPBACK = "127.0.0.1"
 VIEWER_MEMORY_LIMIT = "25%"
@@ -241,9 +240,7 @@ def choose_sinks(
                 fallback = True
             else:
                 sinks.append(rr.GrpcSink(url))
-                notes.append(
-                    f"streaming to a Rerun viewer (pid {proc.pid}, {url}, memory limit {memory_limit})"
-                )
+                notes.append(f"streaming to a Rerun viewer (pid {proc.pid}, {url}, memory limit {memory_limit})")
         else:
             notes.append("no display (neither DISPLAY nor WAYLAND_DISPLAY is set): no viewer")
             fallback = True

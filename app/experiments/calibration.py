@@ -1,15 +1,15 @@
 """Field calibration on the emulated miscalibrated unit: recovered parameters, then a walk with and without.
 
-1. The unit (:class:`device.emulator.icosahedron.Miscalibration`: known K, L, b, K_T, b_T, gyro biases
+1. The unit (:class:`footnav.device.emulator.sensors.icosahedron.Miscalibration`: known K, L, b, K_T, b_T, gyro biases
    and slopes; white noise and in-run drift of ``--grade``) warms up while it turns through the 20
-   icosahedron faces; :class:`pipeline.calibration_procedure.FaceCollector` finds the still faces and
+   icosahedron faces; :class:`footnav.pipeline.calibration.procedure.FaceCollector` finds the still faces and
    fits. The table gives each parameter with its 1σ, the truth, the error and the issue's tolerance.
-2. The same unit walks ``--path`` (``device.emulator.gait.simulate_walk``) while it warms further; the
-   navigator (``pipeline.navigator.navigate``) runs on the raw samples, on the samples corrected with
+2. The same unit walks ``--path`` (``footnav.device.emulator.motion.gait.simulate_walk``) while it warms further; the
+   navigator (``footnav.pipeline.navigation.navigator.navigate``) runs on the raw samples, on the samples corrected with
    the calibration and their temperature, and corrected without temperature (the model at its
    reference temperature: what ``live`` does on the 0x40 stream). Position errors against the truth,
    side by side. The navigator runs on zero-velocity aiding alone (its stance height constraint,
-   ``pipeline.stance_levels``, off), so the table shows what the calibration does to the inertial
+   ``footnav.pipeline.stance.levels``, off), so the table shows what the calibration does to the inertial
    solution itself; with the constraint the level walk's height stays on the floor either way.
 """
 
@@ -20,15 +20,19 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from footnav.app.commands.calibrate import parameter_table
+from footnav.device.emulator.motion.gait import simulate_walk
+from footnav.device.emulator.sensors.icosahedron import (
+    Miscalibration,
+    miscalibrated_signals,
+    simulate_icosahedron,
+    warm_up_c,
+)
+from footnav.pipeline.calibration.model import ImuCalibration
+from footnav.pipeline.calibration.procedure import FaceCollector
+from footnav.pipeline.errors import FootnavError
+from footnav.pipeline.navigation.navigator import NavConfig, navigate
 from numpy.typing import NDArray
-
-from app.calibrate import parameter_table
-from device.emulator.gait import simulate_walk
-from device.emulator.icosahedron import Miscalibration, miscalibrated_signals, simulate_icosahedron, warm_up_c
-from pipeline.calibration import ImuCalibration
-from pipeline.calibration_procedure import FaceCollector
-from pipeline.errors import FootnavError
-from pipeline.navigator import NavConfig, navigate
 
 NAME = "calibration"
 HELP = "icosahedron calibration of an emulated miscalibrated unit: parameters vs truth, walk with/without"

@@ -10,12 +10,12 @@ its adaptive threshold, run on IMU 1):
 - ``classic``: the same filter with its bias states frozen (the classic 9-state OpenShoe ZUPT
   filter: position, velocity, attitude; Nilsson et al. 2012), the gyro bias fixed at IMU 1's mean
   rate over the first second of standing (the start-up calibration the paper filter gets too);
-- ``paper``: the reconstructed filter of Chen et al. (2022), :mod:`pipeline.dual_imu_paper`;
-- ``footnav``: footnav's rigid-board dual-IMU ESKF, :mod:`pipeline.dual_imu_eskf`.
+- ``paper``: the reconstructed filter of Chen et al. (2022), :mod:`footnav.pipeline.dual_imu.chen2022`;
+- ``footnav``: footnav's rigid-board dual-IMU ESKF, :mod:`footnav.pipeline.dual_imu.board_eskf`.
 
 Errors are 3D distances from IMU 1's true position at every sample; per run the maximum and the
 mean, then averaged over the seeds. Every filter is zero-velocity aiding alone: the single-IMU
-navigator's stance height constraint (``pipeline.stance_levels``), which the dual-IMU filter does not
+navigator's stance height constraint (``footnav.pipeline.stance.levels``), which the dual-IMU filter does not
 have, is off, so the table measures what the second IMU adds.
 """
 
@@ -28,18 +28,22 @@ from pathlib import Path
 from typing import Final
 
 import numpy as np
+from footnav.device.emulator.sensors.dual_imu import (
+    DEFAULT_GRADE,
+    DEFAULT_LEVER_B_M,
+    DualImuRecording,
+    simulate_dual_imu,
+)
+from footnav.device.emulator.sensors.imu_errors import AXIS_ERRORS
+from footnav.pipeline.dual_imu.board_eskf import DualEskfConfig, DualEskfTrack, run_dual_eskf
+from footnav.pipeline.dual_imu.chen2022 import DualTrack, PaperConfig, run_paper
+from footnav.pipeline.navigation import eskf
+from footnav.pipeline.navigation.alignment import align_from_still
+from footnav.pipeline.navigation.navigator import NO_CLIPPED_RATES, NavConfig, filter_parameters, navigate, zupt_ratio
+from footnav.pipeline.navigation.profiles import UnitProfile, get_profile
+from footnav.pipeline.stance.detectors import StreamingDetector
+from footnav.views.dual_imu import DualRunView, save_dual_runs
 from numpy.typing import NDArray
-
-from device.emulator.dual_imu import DEFAULT_GRADE, DEFAULT_LEVER_B_M, DualImuRecording, simulate_dual_imu
-from device.emulator.imu_errors import AXIS_ERRORS
-from pipeline import eskf
-from pipeline.alignment import align_from_still
-from pipeline.detectors import StreamingDetector
-from pipeline.dual_imu_eskf import DualEskfConfig, DualEskfTrack, run_dual_eskf
-from pipeline.dual_imu_paper import DualTrack, PaperConfig, run_paper
-from pipeline.navigator import NO_CLIPPED_RATES, NavConfig, filter_parameters, navigate, zupt_ratio
-from pipeline.profiles import UnitProfile, get_profile
-from views.dual_imu import DualRunView, save_dual_runs
 
 F64 = NDArray[np.float64]
 
@@ -56,7 +60,7 @@ LABELS: Final = {
     "footnav": "footnav dual: rigid-board ESKF on both IMUs, both bias sets, rigid-body constraints",
 }
 PROFILE: Final = "generic"
-"""The filters' noise model: a single ICM-20948-class part (``pipeline.profiles``)."""
+"""The filters' noise model: a single ICM-20948-class part (``footnav.pipeline.navigation.profiles``)."""
 DEFAULT_SEEDS: Final = 8
 
 
@@ -152,7 +156,13 @@ def evaluate_run(
         rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, stance, lever, rec.rate_hz, PaperConfig(profile=profile)
     )
     footnav = run_dual_eskf(
-        rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, stance, lever, rec.rate_hz, DualEskfConfig(profile=profile),
+        rec.t_s,
+        rec.acc_b_mps2,
+        rec.gyr_b_radps,
+        stance,
+        lever,
+        rec.rate_hz,
+        DualEskfConfig(profile=profile),
         zupt_ratio(stat, threshold),
     )
     tracks["paper"] = paper.pos1_n_m

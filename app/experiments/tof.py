@@ -3,8 +3,8 @@
 For each walk (the paper's 70 s walk, here the emulator's rectangle course, and the stair course) one
 recording is made: the emulated IMU (``mpu6500x4`` noise and biases, and by default the axis errors
 of a unit whose gyroscope had only its bias calibrated, as the platform's: ``gyro-bias-calibrated``
-in :data:`device.emulator.imu_errors.AXIS_ERRORS`; ``--axis-errors none`` for the noise and biases
-alone) and the emulated ToF sensors (``device.emulator.tof_sensors``). With no axis errors, zero-
+in :data:`footnav.device.emulator.sensors.imu_errors.AXIS_ERRORS`; ``--axis-errors none`` for the noise and biases
+alone) and the emulated ToF sensors (``footnav.device.emulator.sensors.tof``). With no axis errors, zero-
 velocity updates alone lose only millimetres of height in 70 s (0.1-2.7 cm RMS at footfalls, seeds
 1-8), far less than on real recordings with ZUPT alone (README "Accuracy": 0.25 m on the x-io loop
 in 42 s, 0.77 m on the OpenShoe loop); with the gyroscope's datasheet scale and cross-axis tolerances they lose
@@ -14,7 +14,7 @@ measured side by side. Figures against the emulator's ground truth:
 
 - clearance RMS: estimated clearance (``NavBatch.clearance_m``) minus the true height of the IMU above
   the floor under it, over every navigated sample; live, and from each swing's hits past and future
-  (:mod:`pipeline.swing_clearance`, what replay and evaluation can do);
+  (:mod:`footnav.pipeline.gait.tof_clearance`, what replay and evaluation can do);
 - vertical error at footfalls (the accumulated error): RMS and maximum of the z error over the true
   stance samples, and the z error at the end;
 - horizontal error: RMS over stance samples and at the end;
@@ -28,16 +28,15 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-
-from device.emulator.floors import floor_of
-from device.emulator.gait import GaitTruth, simulate_walk
-from device.emulator.imu_errors import AXIS_ERRORS, IMU_GRADES, corrupt
-from device.emulator.tof_sensors import TofSensorModel, tof_readings
-from pipeline.nav_types import NavBatch
-from pipeline.navigator import NavConfig, navigate
-from pipeline.profiles import get_profile
-from pipeline.swing_clearance import swing_clearance
-from pipeline.tof_aiding import CODE_NAMES, STATUS_NAMES, RangeBatch, TofConfig
+from footnav.device.emulator.motion.floors import floor_of
+from footnav.device.emulator.motion.gait import GaitTruth, simulate_walk
+from footnav.device.emulator.sensors.imu_errors import AXIS_ERRORS, IMU_GRADES, corrupt
+from footnav.device.emulator.sensors.tof import TofSensorModel, tof_readings
+from footnav.pipeline.aiding.tof import CODE_NAMES, STATUS_NAMES, RangeBatch, TofConfig
+from footnav.pipeline.gait.tof_clearance import swing_clearance
+from footnav.pipeline.nav_types import NavBatch
+from footnav.pipeline.navigation.navigator import NavConfig, navigate
+from footnav.pipeline.navigation.profiles import get_profile
 
 NAME = "tof"
 HELP = "foot clearance and vertical error with and without the ToF sensors (70 s walk, stairs)"
@@ -46,7 +45,7 @@ WALKS: tuple[tuple[str, float], ...] = (("rectangle", 70.0), ("line", 70.0), ("s
 """(course, duration s) of the experiment's walks."""
 
 AXES = "gyro-bias-calibrated"
-"""The emulated unit's axis errors (a key of :data:`device.emulator.imu_errors.AXIS_ERRORS`)."""
+"""The emulated unit's axis errors (a key of :data:`footnav.device.emulator.sensors.imu_errors.AXIS_ERRORS`)."""
 
 
 @dataclass(frozen=True)
@@ -117,7 +116,7 @@ def figures(truth: GaitTruth, nav: NavBatch, readings: dict[str, int], snap_m: f
 
 def compare(rec: Recording, tof: TofConfig | None = None) -> tuple[RunFigures, RunFigures]:
     """(ZUPT alone, with ToF) figures for the same recording, one navigator configuration. ZUPT alone
-    is the inertial-only filter without its stance height constraint (``pipeline.stance_levels``,
+    is the inertial-only filter without its stance height constraint (``footnav.pipeline.stance.levels``,
     which the ToF floor levels replace): zero-velocity aiding, the baseline of the ToF figures."""
     t = rec.truth
     config = NavConfig(profile=get_profile("mpu6500x4"), stance_levels=False)

@@ -5,7 +5,7 @@ A transport (the pty server, a BLE peripheral) calls :meth:`ShoeFirmware.receive
 until :meth:`ShoeFirmware.next_wakeup`. Behaviour follows the firmware as documented in
 protocol-openshoe.md (sections 3, 4, 5, 6):
 
-- commands parsed with the detected generation's table (:class:`~device.protocol.CommandSet`): the
+- commands parsed with the detected generation's table (:class:`~footnav.device.protocol.commands.CommandSet`): the
   2015 set (default) or the 2014 MIMU22BT set, which answers only the old IDs (``14`` SWDR, ``27``
   processing off, ``21`` outputs off, ``03``, ``04``); IDs of the other set are dropped unparsed or
   misparsed exactly as that firmware would;
@@ -34,12 +34,11 @@ from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
+from footnav.device.emulator.scripts import BaroScript, InsTruth, StepScript, TofScript
+from footnav.device.protocol import commands as p
+from footnav.device.protocol import extensions, ins_states, raw_imu, stepwise
+from footnav.device.protocol.imu import PAYLOAD_DTYPE, TICK_HZ, TICK_WRAP, frame_payload_rows
 from numpy.typing import NDArray
-
-from device import extensions, ins_states, raw_imu, stepwise
-from device import protocol as p
-from device.emulator.scripts import BaroScript, InsTruth, StepScript, TofScript
-from device.imu_packets import PAYLOAD_DTYPE, TICK_HZ, TICK_WRAP, frame_payload_rows
 
 F64 = NDArray[np.float64]
 

@@ -73,7 +73,7 @@ class StepScript:
 class TofScript:
     """ToF readings: t_s (m,), sensor (m,), range_m (m,) (NaN = none), status (m,).
 
-    Made from a true trajectory by :func:`device.emulator.tof_sensors.tof_readings`.
+    Made from a true trajectory by :func:`footnav.device.emulator.sensors.tof.tof_readings`.
     """
 
     t_s: F64
@@ -149,9 +149,7 @@ def reset_indices(
     return np.asarray(out, dtype=np.int64)
 
 
-def steps_from_truth(
-    t_s: F64, pos_n_m: F64, yaw_rad: F64, stance: NDArray[np.bool_], **reset_kw: float
-) -> StepScript:
+def steps_from_truth(t_s: F64, pos_n_m: F64, yaw_rad: F64, stance: NDArray[np.bool_], **reset_kw: float) -> StepScript:
     """The SWDR packets a unit would send for a true trajectory (see the module docstring).
 
     Args:

@@ -1,0 +1,1 @@
+"""The sub-commands of ``footnav``, one module each."""

@@ -1,0 +1,380 @@
+"""``footnav demo``: the emulated shoe on a pseudo-terminal, through the real serial path, end to end.
+
+emulator (gait model + IMU errors) -> pty -> device layer -> pipeline -> Rerun, then a summary with
+the distance walked and the final position error against the emulator's ground truth.
+
+``--miscalibrated``: the shoe is the emulated miscalibrated unit of ``footnav calibrate --demo`` (same
+MCU id, scale factors, misalignment, biases and temperature terms, warming up during the walk); its
+calibration file, if ``calibrate --demo`` made one, is applied as for any unit that connects.
+With ``dual_imu`` the shoe carries a dual-IMU board: two IMUs a lever arm apart on one PCB
+(:mod:`footnav.device.emulator.sensors.dual_imu`), streamed as raw multi-IMU output 0x28 with IMU mask 0b11 and
+navigated by footnav's dual-IMU filter (:mod:`footnav.pipeline.dual_imu.navigator`); the summary adds what went
+wrong with either IMU and whether the configured lever arm agrees with the data.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from footnav.app import heap
+from footnav.app.commands.live import (
+    FOOT_START_OFFSET_M,
+    FootRun,
+    attach_unit,
+    calibration_lookup,
+    dual_nav_config,
+    dual_view_sink,
+    finish_capture,
+    foot_sinks,
+    link_reporter,
+    new_session_id,
+    notice,
+    open_capture,
+    run_feet,
+    unit_header,
+)
+from footnav.app.config import DEFAULT, Config, defaults
+from footnav.app.session import SerialSessionResult, UnitAddress, run_device_session
+from footnav.app.status import StatusLine, input_handling
+from footnav.device.emulator.motion.floors import floor_of
+from footnav.device.emulator.motion.gait import GaitTruth, simulate_walk
+from footnav.device.emulator.scripts import BaroScript, TofScript, baro_from_height
+from footnav.device.emulator.sensors.dual_imu import DEFAULT_LEVER_B_M, rigid_board
+from footnav.device.emulator.sensors.icosahedron import MISCALIBRATED_MCU_ID, miscalibrated_signals, warm_up_c
+from footnav.device.emulator.sensors.imu_errors import IMU_GRADES, corrupt
+from footnav.device.emulator.sensors.tof import TofMount, TofSensorModel, tof_readings
+from footnav.device.emulator.serving.pty import PtyShoeServer
+from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
+from footnav.device.unit import RawImuMode
+from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.dual_imu.lever_arm import check_lever_arm
+from footnav.pipeline.dual_imu.navigator import DualNavigator
+from footnav.pipeline.navigation.navigator import Navigator
+from footnav.pipeline.navigation.profiles import get_profile
+from footnav.pipeline.runner import NavSink
+from footnav.pipeline.smoothing.stepwise import make_navigator
+from footnav.views.outputs import open_session_views
+from numpy.typing import NDArray
+
+PATHS = ("rectangle", "line", "figure8", "stairs")
+DEMO_PUT_TIMEOUT_S = 60.0
+"""At a pace other than real time, how long a batch may wait for room in a Rerun logger's queue."""
+# the profile the filter assumes for each emulated sensor grade
+PROFILE_OF_GRADE = {
+    "mpu6500x4": "mpu6500x4",
+    "adis16367": "adis16367",
+    "icm20948": "generic",
+    "gx3": "gx3",
+    "ideal": "mpu6500x4",
+}
+
+
+@dataclass(frozen=True)
+class DemoOptions:
+    """What ``footnav demo`` was asked for."""
+
+    path: str = "rectangle"
+    duration_s: float = 60.0
+    speed_mps: float = 1.4
+    grade: str = "mpu6500x4"
+    axes: str = "none"
+    """Scale-factor and cross-axis errors of the emulated IMU(s) (a key of ``AXIS_ERRORS``)."""
+    save: Path | None = None
+    viewer: bool = True
+    realtime: float = 1.0  # emulator pace: 1 = real time, math.inf = as fast as possible
+    seed: int = 1
+    feet: int = 1
+    """1: one emulated shoe (``foot``); 2: ``left`` and ``right``, the same walk side by side."""
+    web: bool = False
+    capture: bool = True
+    config: Config | None = None
+    """Sessions folder, filter and detector settings (default: built-in; the profile follows the grade)."""
+    collect: Callable[[str], NavSink] | None = None
+    """Tests: an extra NavSink per foot (given the foot name)."""
+    miscalibrated: bool = False
+    """The shoe is the emulated miscalibrated unit (see the module docstring)."""
+    dual_imu: bool = False
+    """A dual-IMU board instead of the single (calibrated-output) IMU; one foot only."""
+    lever_b_m: tuple[float, float, float] | None = None
+    """The lever arm the filter is told (IMU 2 in IMU 1's axes, m); None: the default board's."""
+    board_lever_b_m: tuple[float, float, float] | None = None
+    """Where the emulated board really has IMU 2, m; None: ``lever_b_m`` (a different one is a
+    board mounted differently: the lever-arm check reports it)."""
+    stance: str = "inertial"
+    """Stance detector mode with ToF units: inertial, height, and, or (``footnav.pipeline.stance.height_detector``)."""
+    tof: bool = False
+    """Emulate the multi-sensor unit: three ToF sensors and a barometer (extension states 0xE1/0xE2),
+    fused by the navigator (``footnav.pipeline.aiding.tof``)."""
+
+
+@dataclass(frozen=True)
+class DemoSummary:
+    """The figures the demo prints at the end."""
+
+    distance_m: float
+    final_error_m: float
+    samples_expected: int
+    samples_navigated: int
+    lost_packets: int
+
+    @property
+    def error_percent(self) -> float:
+        return 100.0 * self.final_error_m / self.distance_m if self.distance_m > 0 else math.nan
+
+    def lines(self) -> list[str]:
+        return [
+            f"samples navigated: {self.samples_navigated} of {self.samples_expected} "
+            f"(lost packets: {self.lost_packets})",
+            f"distance walked:   {self.distance_m:.2f} m (ground truth)",
+            f"final position error: {self.final_error_m:.3f} m = {self.error_percent:.2f} % of distance",
+        ]
+
+
+def summarise(truth: GaitTruth, result: SerialSessionResult, samples_navigated: int) -> DemoSummary | None:
+    """Compare the last estimate with the ground truth of the same sample (matched by packet counter)."""
+    nav = result.last_nav
+    if nav is None or result.first_counter is None or result.link is None:
+        return None
+    # counters run one per sample at the 1 kHz base rate; the demo streams every sample
+    last_index = round(float(nav.t_s[-1]) * truth.rate_hz)
+    error = float(np.linalg.norm(nav.pos_n_m[-1] - truth.pos_n_m[last_index]))
+    return DemoSummary(truth.distance_m, error, truth.t_s.size, samples_navigated, result.link.lost_packets)
+
+
+def demo_truth(opts: DemoOptions, foot_index: int) -> tuple[GaitTruth, NDArray[np.float64], NDArray[np.float64]]:
+    """Ground truth and corrupted IMU signals of one emulated foot (the second foot: same walk, own
+    sensor errors)."""
+    truth = simulate_walk(opts.path, opts.duration_s, rate_hz=1000.0, speed_mps=opts.speed_mps, seed=opts.seed)
+    if opts.miscalibrated:
+        temp = warm_up_c(truth.t_s, start_c=32.0, end_c=42.0, time_constant_s=120.0)
+        acc, gyr = miscalibrated_signals(
+            truth.acc_b_mps2, truth.gyr_b_radps, temp, truth.rate_hz, grade=opts.grade, seed=opts.seed + foot_index
+        )
+        return truth, acc, gyr
+    acc, gyr, _ = corrupt(
+        truth.acc_b_mps2,
+        truth.gyr_b_radps,
+        truth.rate_hz,
+        IMU_GRADES[opts.grade],
+        seed=opts.seed + foot_index,
+        axes=opts.axes,
+    )
+    return truth, acc, gyr
+
+
+def dual_demo_truth(opts: DemoOptions) -> tuple[GaitTruth, NDArray[np.float64], NDArray[np.float64]]:
+    """Ground truth of IMU 1 and the (n, 2, 3) measurements of a dual-IMU board on the foot (the two
+    IMUs' errors drawn independently)."""
+    truth = simulate_walk(opts.path, opts.duration_s, rate_hz=1000.0, speed_mps=opts.speed_mps, seed=opts.seed)
+    board = rigid_board(truth, opts.board_lever_b_m or opts.lever_b_m or DEFAULT_LEVER_B_M)
+    acc = np.empty_like(board.acc_b_mps2)
+    gyr = np.empty_like(board.gyr_b_radps)
+    for i in range(2):
+        acc[:, i], gyr[:, i], _ = corrupt(
+            board.acc_b_mps2[:, i],
+            board.gyr_b_radps[:, i],
+            truth.rate_hz,
+            IMU_GRADES[opts.grade],
+            seed=opts.seed + i,
+            axes=opts.axes,
+        )
+    return truth, acc, gyr
+
+
+def demo_extensions(
+    opts: DemoOptions, truth: GaitTruth, foot_index: int, mounting: TofConfig | None = None
+) -> tuple[TofScript | None, BaroScript | None]:
+    """The ToF and barometer readings of one emulated foot (none unless ``opts.tof``), its sensors
+    mounted as ``mounting`` says (the [tof] configuration; default: ``TofConfig()``)."""
+    if not opts.tof:
+        return None, None
+    m = mounting or TofConfig()
+    dirs = np.asarray(m.dir_b) / np.linalg.norm(m.dir_b, axis=1, keepdims=True)
+    mounts = tuple(TofMount(lever, (d[0], d[1], d[2])) for lever, d in zip(m.lever_b_m, dirs.tolist(), strict=True))
+    sensors = TofSensorModel(mounts=mounts, sigma_m=m.sigma_range_m, seed=opts.seed + foot_index)
+    tof = tof_readings(truth.t_s, truth.pos_n_m, truth.quat_nb_wxyz, floor_of(opts.path), sensors)
+    return tof, baro_from_height(truth.t_s, truth.pos_n_m[:, 2])
+
+
+def run_demo(opts: DemoOptions) -> int:
+    """Run the demo; returns the process exit code."""
+    if opts.path not in PATHS:
+        raise ValueError(f"unknown path {opts.path!r}; choose one of {', '.join(PATHS)}")
+    if opts.feet not in (1, 2):
+        raise ValueError(f"the demo emulates 1 or 2 feet, not {opts.feet}")
+    if opts.dual_imu and opts.feet != 1:
+        raise ValueError("the dual-IMU demo emulates one shoe")
+    if opts.miscalibrated and opts.axes != "none":
+        raise ValueError("the miscalibrated unit has its own scale and misalignment errors; drop --axis-errors")
+    feet = ("foot",) if opts.feet == 1 else ("left", "right")
+    truths = [dual_demo_truth(opts)] if opts.dual_imu else [demo_truth(opts, k) for k in range(len(feet))]
+    truth = truths[0][0]
+    board = " with a dual-IMU board" if opts.dual_imu else ""
+    axes = "" if opts.axes == "none" else f", axis errors {opts.axes}"
+    print(
+        f"footnav demo: {len(feet)} emulated shoe(s){board} ({opts.grade}{axes}), {opts.path} walk, "
+        f"{opts.duration_s:.0f} s at {opts.speed_mps:.1f} m/s, 1 kHz over a pseudo-terminal",
+        file=sys.stderr,
+    )
+    cfg = opts.config if opts.config is not None else defaults()
+    if opts.config is None or cfg.source("unit.profile") == DEFAULT:
+        cfg.set("unit.profile", PROFILE_OF_GRADE[opts.grade], f"demo (grade {opts.grade})")
+    session_id = new_session_id("demo")
+    heap.limit_arenas()  # before the viewer's and the capture's threads start
+    views, notes = open_session_views(
+        save=opts.save,
+        want_viewer=opts.viewer,
+        web=opts.web,
+        feet=feet,
+        recording_id=session_id,
+        notice=notice,
+        dual_runs=feet if opts.dual_imu else (),
+    )
+    for note in notes:
+        print(note, file=sys.stderr)
+    two = len(feet) > 1
+    if views is not None:
+        for foot, (t, _, _) in zip(feet, truths, strict=True):
+            offset = np.asarray(FOOT_START_OFFSET_M[foot]) if two else np.zeros(3)
+            views.log_truth(t.pos_n_m + offset, t_s=t.t_s, foot=foot)
+        views.log_event(
+            f"demo: {opts.path}, {opts.duration_s:.0f} s, grade {opts.grade}, feet {', '.join(feet)}", t_s=0.0
+        )
+    if opts.dual_imu:
+        t_dual, acc_dual, gyr_dual = truths[0]
+        servers = [
+            PtyShoeServer(
+                t_dual.t_s,
+                acc_dual[:, 0],
+                gyr_dual[:, 0],
+                speed=opts.realtime,
+                record=False,
+                imu_acc_b_mps2=acc_dual,
+                imu_gyr_b_radps=gyr_dual,
+            )
+        ]
+    else:
+        mcu_id = MISCALIBRATED_MCU_ID if opts.miscalibrated else None
+        ext = [demo_extensions(opts, t, k, cfg.tof_config(opts.stance)) for k, (t, _, _) in enumerate(truths)]
+        servers = [
+            PtyShoeServer(t.t_s, acc, gyr, speed=opts.realtime, record=False, mcu_id=mcu_id, tof=tof, baro=baro)
+            for (t, acc, gyr), (tof, baro) in zip(truths, ext, strict=True)
+        ]
+    extra = {"command": "footnav demo", "emulator": f"{opts.path} {opts.grade} axes {opts.axes}"}
+    capture = open_capture(cfg, session_id, enabled=opts.capture, extra=extra)
+    status = StatusLine(feet=feet)
+    nav_config = cfg.nav_config()
+    lever = opts.lever_b_m or DEFAULT_LEVER_B_M
+    dual_config = dual_nav_config(nav_config, lever)
+    runs = [
+        FootRun(
+            foot,
+            server.port,
+            DualNavigator(dual_config, rate_hz=truth.rate_hz)
+            if opts.dual_imu
+            else make_navigator(nav_config, truth.rate_hz, tof=cfg.tof_config(opts.stance)),
+        )
+        for foot, server in zip(feet, servers, strict=True)
+    ]
+    # Faster than real time the emulator waits for footnav, so footnav waits for the Rerun loggers
+    # (as a replay does) rather than dropping samples from the recording.
+    put_timeout_s = 0.0 if opts.realtime == 1.0 else DEMO_PUT_TIMEOUT_S
+    for run in runs:
+        foot_sinks(run, views, status, two_feet=two, put_timeout_s=put_timeout_s)
+        if opts.collect is not None:
+            run.sinks.append(opts.collect(run.foot))
+        if views is not None and isinstance(run.navigator, DualNavigator):
+            run.sinks.append(dual_view_sink(run.navigator, views, run.foot))
+        if capture is not None:
+            run.tap = capture.add_unit(
+                unit_header(
+                    run.foot,
+                    run.port,
+                    "pty (emulator)",
+                    cfg,
+                    0,
+                    extensions=opts.tof,
+                    stance=opts.stance,
+                    dual_imu_lever_b_m=lever if opts.dual_imu else None,
+                )
+            )
+    server_of = dict(zip(feet, servers, strict=True))
+
+    async def session(run: FootRun) -> None:
+        server = server_of[run.foot]
+        await run_device_session(
+            UnitAddress("serial", server.port),
+            run.navigator,
+            run.sinks,
+            expect_samples=truth.t_s.size,
+            source_done=server.finished.is_set,
+            status=status.foot(run.foot),
+            result=run.result,
+            capture=run.tap,
+            on_open=lambda unit: attach_unit(run, unit),
+            on_link_event=link_reporter(run, views, capture, two_feet=two),
+            calibration=None if opts.dual_imu else calibration_lookup(cfg, run.foot, capture, views, two_feet=two),
+            mode=RawImuMode(imu_mask=DUAL_IMU_MASK) if opts.dual_imu else None,
+            extensions=opts.tof and not opts.dual_imu,
+        )
+
+    interrupted = False
+    try:
+        with contextlib.ExitStack() as stack:
+            for server in servers:
+                stack.enter_context(server)
+            asyncio.run(run_feet(runs, session))
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        status.finish()
+        finish_capture(capture, runs)
+        if views is not None:
+            for note in views.close():
+                notice(note)
+    if interrupted:
+        print("interrupted: stopped the unit and closed the recording", file=sys.stderr)
+    code = 0
+    for run, (t, _, _) in zip(runs, truths, strict=True):
+        summary = summarise(t, run.result, run.navigator.stats.samples_out)
+        prefix = f"{run.foot}: " if two else ""
+        if summary is None:
+            print(f"{prefix}no navigation output (the unit never stood still long enough to align)", file=sys.stderr)
+            code = 1
+            continue
+        for line in summary.lines():
+            print(prefix + line)
+        if handled := input_handling(run.navigator.stats):
+            print(f"{prefix}input handling: {handled}")
+        if isinstance(run.navigator, DualNavigator):
+            for line in dual_summary_lines(run.navigator, truths[0][1], truths[0][2], lever):
+                print(prefix + line)
+        if opts.tof and isinstance(run.navigator, Navigator):
+            counts = run.navigator.tof.counts.by_reason
+            listed = ", ".join(f"{k} {v}" for k, v in sorted(counts.items(), key=lambda kv: -kv[1]))
+            print(f"{prefix}ToF readings: {listed or 'none received'}")
+    return code
+
+
+def dual_summary_lines(
+    navigator: DualNavigator,
+    acc_b_mps2: NDArray[np.float64],
+    gyr_b_radps: NDArray[np.float64],
+    lever: tuple[float, float, float],
+) -> list[str]:
+    """What the dual-IMU demo adds: faults of either IMU, and the lever-arm check on what was sent."""
+    lines = [f"dual-IMU: {m}" for m in navigator.messages] or ["dual-IMU: both IMUs usable at every sample"]
+    _, _, stance = DualNavigator(navigator.config, navigator.rate_hz).detector.update(
+        np.nan_to_num(acc_b_mps2[:, 0]), np.nan_to_num(gyr_b_radps[:, 0])
+    )
+    sigma = get_profile(navigator.config.filter.profile.name).acc_noise_mps2_rthz * math.sqrt(navigator.rate_hz)
+    check = check_lever_arm(acc_b_mps2, gyr_b_radps, stance, np.asarray(lever), navigator.rate_hz, sigma_acc_mps2=sigma)
+    lines.append(f"dual-IMU: {check.message}")
+    return lines

@@ -1,0 +1,165 @@
+"""``footnav evaluate``: accuracy over recordings with ground truth or a known closed loop.
+
+For each recording: ATE in 2D and 3D after a 4-DoF (yaw + translation) alignment with the mirror
+test, the PyShoe paper's ARMSE-2D, the end-point error, and for closed walks the loop-closure error;
+errors also as a percentage of the distance walked. One default configuration for every file.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from footnav.app.commands.export import navigate_recording
+from footnav.app.progress import ProgressBar
+from footnav.app.status import input_handling
+from footnav.device.files.recordings import detect_format, load_recording
+from footnav.pipeline.errors import FootnavError
+from footnav.pipeline.metrics import armse_2d_pyshoe, ate, loop_closure_error, path_length_m
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Figures for one recording (NaN where they do not apply)."""
+
+    name: str
+    format: str
+    samples: int
+    distance_m: float
+    armse_2d_m: float = math.nan
+    ate_2d_m: float = math.nan
+    ate_3d_m: float = math.nan
+    mirrored: bool = False
+    end_point_m: float = math.nan
+    loop_3d_m: float = math.nan
+    loop_2d_m: float = math.nan
+    handling: str = ""
+    """What was done with doubtful input (``footnav.app.status.input_handling``; empty: nothing)."""
+
+    @property
+    def end_point_pct(self) -> float:
+        return 100.0 * self.end_point_m / self.distance_m
+
+    @property
+    def loop_pct(self) -> float:
+        return 100.0 * self.loop_3d_m / self.distance_m
+
+
+def evaluate_file(path: Path, smooth: str | None = None, stance_levels: bool = True) -> Evaluation:
+    """Navigate one recording (smoothed when ``smooth`` is one of ``footnav.app.commands.export.SMOOTHING``) and measure
+    it (with the stance height levels unless told not to)."""
+    rec = load_recording(path)
+    if rec.gt_pos_m is None and not rec.closed_loop:
+        raise FootnavError(f"{path}: no ground truth and not a known closed loop; nothing to measure against")
+    nav, stats = navigate_recording(rec, smooth=smooth, stance_levels=stance_levels)
+    est = nav.pos_n_m
+    skipped = stats.samples_before_alignment
+    handling = input_handling(stats)
+    if rec.gt_pos_m is not None:
+        gt = rec.gt_pos_m[skipped:] - rec.gt_pos_m[skipped]
+        fit = ate(est, gt, mirror_test=True)
+        est_for_end = est * np.array([1.0, -1.0, 1.0]) if fit.mirrored else est
+        c, s = math.cos(fit.yaw_rad), math.sin(fit.yaw_rad)
+        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        aligned = (est_for_end - est_for_end.mean(axis=0)) @ rot.T + gt.mean(axis=0)
+        return Evaluation(
+            name=rec.name,
+            format=rec.format,
+            samples=len(nav),
+            distance_m=path_length_m(gt[:: max(1, round(rec.rate_hz / 20))]),
+            armse_2d_m=armse_2d_pyshoe(est_for_end, gt),
+            ate_2d_m=fit.rmse_2d_m,
+            ate_3d_m=fit.rmse_3d_m,
+            mirrored=fit.mirrored,
+            end_point_m=float(np.linalg.norm(aligned[-1] - gt[-1])),
+            handling=handling,
+        )
+    loop_3d, loop_2d = loop_closure_error(est)
+    return Evaluation(
+        name=rec.name,
+        format=rec.format,
+        samples=len(nav),
+        distance_m=path_length_m(est[:: max(1, round(rec.rate_hz / 20))]),
+        loop_3d_m=loop_3d,
+        loop_2d_m=loop_2d,
+        end_point_m=loop_3d,
+        handling=handling,
+    )
+
+
+def find_recordings(paths: Iterable[Path]) -> list[Path]:
+    """Files given, and recordings of a known format inside folders given (sorted)."""
+    found: list[Path] = []
+    for p in paths:
+        if p.is_dir():
+            for f in sorted(q for q in p.rglob("*") if q.is_file()):
+                try:
+                    if detect_format(f) != "csv" or f.suffix.lower() == ".csv":
+                        found.append(f)
+                except FootnavError:
+                    continue
+        elif p.exists():
+            found.append(p)
+        else:
+            raise FootnavError(f"{p}: no such file or folder")
+    return found
+
+
+def _fmt(v: float, width: int = 8, digits: int = 3) -> str:
+    return f"{'-':>{width}}" if math.isnan(v) else f"{v:>{width}.{digits}f}"
+
+
+def format_table(rows: list[Evaluation]) -> str:
+    """The per-file table and a summary, as text."""
+    head = (
+        f"{'recording':<24} {'format':<8} {'dist m':>7} {'ARMSE2D':>8} {'ATE2D':>8} {'ATE3D':>8} {'mirror':>6} "
+        f"{'end m':>8} {'end %':>6} {'loop3D':>8} {'loop2D':>8} {'loop %':>6}"
+    )
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        lines.append(
+            f"{r.name[:24]:<24} {r.format:<8} {r.distance_m:>7.1f} {_fmt(r.armse_2d_m)} {_fmt(r.ate_2d_m)} "
+            f"{_fmt(r.ate_3d_m)} {'yes' if r.mirrored else 'no':>6} {_fmt(r.end_point_m)} "
+            f"{_fmt(r.end_point_pct, 6, 2)} {_fmt(r.loop_3d_m)} {_fmt(r.loop_2d_m)} {_fmt(r.loop_pct, 6, 2)}"
+        )
+    armse = np.array([r.armse_2d_m for r in rows if not math.isnan(r.armse_2d_m)])
+    loops = [r for r in rows if not math.isnan(r.loop_3d_m)]
+    lines.append("")
+    if armse.size:
+        lines.append(
+            f"ground truth ({armse.size} files): ARMSE-2D mean {armse.mean():.3f} m, median {np.median(armse):.3f} m, "
+            f"max {armse.max():.3f} m"
+        )
+    if loops:
+        lines.append(
+            f"closed loops ({len(loops)} files): loop closure 3D mean {np.mean([r.loop_3d_m for r in loops]):.3f} m, "
+            f"2D mean {np.mean([r.loop_2d_m for r in loops]):.3f} m"
+        )
+    handled = [r for r in rows if r.handling]
+    if handled:
+        lines.append("input handling:")
+        lines.extend(f"  {r.name}: {r.handling}" for r in handled)
+    return "\n".join(lines)
+
+
+def run_evaluate(
+    paths: list[Path], smooth: str | None = None, stance_levels: bool = True
+) -> tuple[list[Evaluation], list[str]]:
+    """Evaluate every recording found; returns the rows and one-line problems (files that failed)."""
+    files = find_recordings(paths)
+    if not files:
+        raise FootnavError("no recordings found in " + ", ".join(str(p) for p in paths))
+    rows: list[Evaluation] = []
+    problems: list[str] = []
+    bar = ProgressBar(len(files), "evaluate")
+    for f in files:
+        try:
+            rows.append(evaluate_file(f, smooth, stance_levels))
+        except FootnavError as exc:
+            problems.append(str(exc))
+        bar.step(f.name)
+    bar.close()
+    return rows, problems

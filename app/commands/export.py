@@ -1,0 +1,273 @@
+"""``footnav export``: a recording -> one CSV row per sample of the navigation solution.
+
+A recording from another tool is loaded (``footnav.device.files.recordings``) and navigated here; a footnav capture
+(``.mcap``) is replayed headless through the same device decoding and pipeline as ``footnav replay``
+(so its rows are the live estimates, bit for bit), one file per foot, and a ToF unit's rows carry its
+clearance too (:data:`CLEARANCE_COLUMNS`).
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+import numpy as np
+from footnav.app.status import input_handling
+from footnav.device.files.capture import MCAP_MAGIC
+from footnav.device.files.recordings import CsvMapping, Recording, load_recording
+from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.errors import FootnavError
+from footnav.pipeline.gait.steps import segment_steps
+from footnav.pipeline.gait.tof_clearance import swing_clearance
+from footnav.pipeline.nav_types import NavBatch
+from footnav.pipeline.navigation.navigator import NavConfig, NavStats, navigate
+from footnav.pipeline.navigation.profiles import get_profile
+from footnav.pipeline.navigation.saturation import reconstruct_saturated_rates
+
+EXPORT_COLUMNS = (
+    "t",
+    "x",
+    "y",
+    "z",
+    "vx",
+    "vy",
+    "vz",
+    "qw",
+    "qx",
+    "qy",
+    "qz",
+    "stance",
+    "var_x",
+    "var_y",
+    "var_z",
+)
+
+
+SMOOTHING = ("whole", "step")
+"""``smooth`` choices: the RTS smoother of the whole recording (``footnav.pipeline.smoothing.rts``), or step by step
+as a live session shows the track once each step has ended (``footnav.pipeline.smoothing.stepwise``)."""
+
+
+def navigate_recording(
+    rec: Recording, profile: str | None = None, smooth: str | None = None, stance_levels: bool = True
+) -> tuple[NavBatch, NavStats]:
+    """Run the navigator (and a smoother when asked: one of ``SMOOTHING``) over a whole recording,
+    with the stance height levels unless ``stance_levels`` is False (``footnav.pipeline.stance.levels``).
+
+    The gyroscope's saturated stretches are reconstructed first (``footnav.pipeline.navigation.saturation``: this needs
+    the whole recording, so it happens here and not in the live navigator).
+
+    Raises:
+        FootnavError: the recording never stands still, so it cannot be aligned.
+    """
+    config = NavConfig(profile=get_profile(profile or rec.profile), stance_levels=stance_levels)
+    sat = reconstruct_saturated_rates(rec.t_s, rec.gyr_b_radps)
+    if smooth == "whole":
+        from footnav.pipeline.smoothing.rts import smooth_recording
+
+        nav, stats = smooth_recording(
+            rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, config, gyr_clipped_b=sat.clipped_b
+        )
+    elif smooth == "step":
+        from footnav.pipeline.smoothing.stepwise import step_smooth_recording
+
+        nav, stats = step_smooth_recording(
+            rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, config, gyr_clipped_b=sat.clipped_b
+        )
+    elif smooth is not None:
+        raise ValueError(f"smooth must be one of {SMOOTHING} or None, got {smooth!r}")
+    else:
+        nav, stats = navigate(
+            rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, config, gyr_clipped_b=sat.clipped_b
+        )
+    if nav is None:
+        raise FootnavError(
+            f"{rec.name}: the unit is never still for {config.align_s:.1f} s, so roll and pitch cannot be "
+            "aligned; a recording must start (or at least include) a moment of standing still"
+        )
+    stats.rates_reconstructed = sat.reconstructed
+    stats.rates_clipped = int(np.count_nonzero(sat.clipped_b))
+    return nav, stats
+
+
+CLEARANCE_COLUMNS = ("clearance", "clearance_swing", "floor_z")
+"""Added for a ToF unit: the live clearance above the floor under the IMU, the one from each swing's
+hits past and future (``footnav.pipeline.gait.tof_clearance``), and the height of that floor, m (NaN before the
+unit's first range reading, where the clearance is the height above the start floor)."""
+
+
+def write_track_csv(nav: NavBatch, path: Path) -> None:
+    """Write ``EXPORT_COLUMNS`` (and, for a ToF unit, ``CLEARANCE_COLUMNS``): SI units, navigation frame
+    right-handed z up, origin at the start."""
+    var = np.diagonal(nav.pos_cov_n_m2, axis1=1, axis2=2)
+    columns = [nav.t_s, nav.pos_n_m, nav.vel_n_mps, nav.quat_nb_wxyz, nav.stance.astype(np.float64), var]
+    names: tuple[str, ...] = EXPORT_COLUMNS
+    if nav.floor_z_m is not None and nav.ranges is not None:
+        swing = swing_clearance(nav.t_s, nav.pos_n_m, nav.stance, nav.clearance_m, nav.ranges, TofConfig().snap_m)
+        columns += [nav.clearance_m, swing, nav.floor_z_m]
+        names = EXPORT_COLUMNS + CLEARANCE_COLUMNS
+    table = np.column_stack(columns)
+    stance_col = EXPORT_COLUMNS.index("stance")
+    _write_csv(path, names, ([int(v) if i == stance_col else f"{v:.9g}" for i, v in enumerate(row)] for row in table))
+
+
+def _write_csv(path: Path, header: tuple[str, ...], rows: Iterable[list[int | str]]) -> None:
+    """``header`` and ``rows`` to ``path``; a file that cannot be written is a ``FootnavError``."""
+    try:
+        with path.open("w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(header)
+            writer.writerows(rows)
+    except OSError as exc:
+        raise FootnavError(f"cannot write {path}: {exc.strerror}") from None
+
+
+STEP_COLUMNS = (
+    "t",
+    "index",
+    "dx",
+    "dy",
+    "dz",
+    "dyaw",
+    "is_step",
+    "length",
+    "duration",
+    "clearance_max",
+    "x",
+    "y",
+    "z",
+    "yaw",
+    "c_xx",
+    "c_xy",
+    "c_xz",
+    "c_xyaw",
+    "c_yy",
+    "c_yz",
+    "c_yyaw",
+    "c_zz",
+    "c_zyaw",
+    "c_yawyaw",
+)
+"""``--steps``: OpenShoe's stepwise output computed from the track (``footnav.pipeline.gait.steps``), one row per
+step epoch (the end of a stance): its time and sample index in the track; the displacement since the
+previous epoch in that epoch's heading frame (x forward, z up), m, and the heading change, rad;
+whether it is a step (5 cm or more; else standing); its horizontal length, m, and duration, s; the
+largest clearance between the two epochs, m; the position and heading at the epoch (navigation
+frame); and the upper triangle of the 4×4 covariance of (dx, dy, dz, dyaw), m² and rad² (empty for
+a smoothed track: the smoother gives no covariance between two epochs, which a step's needs)."""
+
+
+def write_steps_csv(nav: NavBatch, path: Path, *, with_covariance: bool = True) -> str:
+    """Write ``STEP_COLUMNS`` for the steps of ``nav``; returns what was written, for the summary."""
+    assert nav.cov_pos_yaw is not None
+    steps = segment_steps(nav.t_s, nav.pos_n_m, nav.quat_nb_wxyz, nav.stance, nav.cov_pos_yaw)
+    starts = np.concatenate([[0], steps.index[:-1]])
+    duration = steps.t_s - nav.t_s[starts]
+    clearance = np.array([float(np.max(nav.clearance_m[a : b + 1])) for a, b in zip(starts, steps.index, strict=True)])
+    upper = np.triu_indices(4)
+    cov = steps.cov[:, upper[0], upper[1]] if with_covariance else np.full((len(steps), 10), np.nan)
+    table = np.column_stack(
+        [
+            steps.t_s,
+            steps.index,
+            steps.dpos_step_m,
+            steps.dyaw_rad,
+            steps.is_step,
+            np.linalg.norm(steps.dpos_step_m[:, :2], axis=1),
+            duration,
+            clearance,
+            steps.pos_n_m,
+            steps.yaw_rad,
+            cov,
+        ]
+    )
+    integer = {STEP_COLUMNS.index("index"), STEP_COLUMNS.index("is_step")}
+    _write_csv(
+        path,
+        STEP_COLUMNS,
+        ([int(v) if i in integer else ("" if np.isnan(v) else f"{v:.9g}") for i, v in enumerate(row)] for row in table),
+    )
+    return f"{int(np.count_nonzero(steps.is_step))} steps ({len(steps)} rows) to {path}"
+
+
+def run_export(
+    source: Path,
+    out: Path,
+    *,
+    fmt: str | None,
+    columns: str | None,
+    profile: str | None,
+    smooth: str | None,
+    stance_levels: bool = True,
+    steps_out: Path | None = None,
+) -> str:
+    """Load, navigate and write the track (and, with ``steps_out``, its steps); returns a one-line
+    summary."""
+    if _is_capture(source):
+        options = (("--format", fmt), ("--columns", columns), ("--profile", profile))
+        given = [name for name, v in options if v] + ([] if stance_levels else ["--no-stance-levels"])
+        if given:
+            raise FootnavError(
+                f"{source} is a footnav capture, exported with the settings it was recorded with; "
+                f"drop {', '.join(given)}"
+            )
+        if smooth:
+            raise FootnavError(
+                f"{source} is a footnav capture: --smooth and --step-smoothing are not available for captures "
+                "(the smoothers do not take the ToF channel); drop it for the live estimates"
+            )
+        return export_capture(source, out, steps_out)
+    rec = load_recording(source, fmt, CsvMapping.parse(columns) if columns else None)
+    nav, stats = navigate_recording(rec, profile, smooth, stance_levels)
+    write_track_csv(nav, out)
+    steps = "" if steps_out is None else f", {write_steps_csv(nav, steps_out, with_covariance=smooth is None)}"
+    skipped = (
+        f", {stats.samples_before_alignment} samples before the first still period not navigated"
+        if stats.samples_before_alignment
+        else ""
+    )
+    handled = f"; {h}" if (h := input_handling(stats)) else ""
+    return (
+        f"wrote {len(nav)} rows to {out}{steps} ({rec.format} recording, profile {profile or rec.profile}{skipped})"
+        f"{handled}"
+    )
+
+
+def _is_capture(path: Path) -> bool:
+    """The file starts with MCAP's magic bytes (footnav's captures; ``footnav.app.commands.replay`` checks the rest)."""
+    try:
+        with path.open("rb") as f:
+            return f.read(len(MCAP_MAGIC)) == MCAP_MAGIC
+    except OSError:
+        return False  # the loaders say what is wrong with it
+
+
+def export_capture(source: Path, out: Path, steps_out: Path | None = None) -> str:
+    """Replay a footnav capture headless and write each foot's rows (``out`` for one foot, else
+    ``<stem>-<foot><suffix>`` beside it) and, with ``steps_out``, its steps (named alike); returns a
+    one-line summary."""
+    from footnav.app.commands.replay import ReplayOptions, run_replay
+    from footnav.app.config import defaults
+    from footnav.views.convert import concat_batches
+
+    got: dict[str, list[NavBatch]] = {}
+
+    def collect(foot: str) -> Callable[[NavBatch], None]:
+        return got.setdefault(foot, []).append
+
+    if run_replay(ReplayOptions(path=source, config=defaults(), viewer=False, collect=collect)) != 0:
+        raise FootnavError(f"{source}: the replay failed; nothing written")
+    feet = [foot for foot, batches in got.items() if batches]
+    if not feet:
+        raise FootnavError(f"{source}: the capture never stood still long enough to align; nothing written")
+    written = []
+    for foot in feet:
+        path = out if len(feet) == 1 else out.with_name(f"{out.stem}-{foot}{out.suffix}")
+        nav = concat_batches(got[foot])
+        write_track_csv(nav, path)
+        written.append(f"{len(nav)} rows to {path}{' with clearance' if nav.floor_z_m is not None else ''}")
+        if steps_out is not None:
+            spath = steps_out if len(feet) == 1 else steps_out.with_name(f"{steps_out.stem}-{foot}{steps_out.suffix}")
+            written.append(write_steps_csv(nav, spath))
+    return f"wrote {'; '.join(written)} (footnav capture, replayed)"

@@ -1,0 +1,272 @@
+"""``footnav replay FILE``: a logged session through the same device decoding and pipeline as live.
+
+footnav captures (``.mcap``): each unit's captured device -> host reads are fed, one captured read per
+``read()``, to the same :class:`footnav.device.unit.OpenShoeUnit` (start handshake included: the unit's ACKs
+are in the capture), with the navigator settings recorded in the capture, and batches carry the
+captured host times: the estimates equal the live ones exactly. A replay stops where the live session
+stopped (the capture's ``end`` event), or at the end of a truncated capture.
+
+Recordings from other tools are dispatched by file type in :func:`detect_format`; their loaders are
+not part of this version, so they get a clear "unsupported format" message.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import io
+import math
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from footnav.app.calibration_store import StoredCalibration, calibration_dir, load_calibration
+from footnav.app.commands.live import FootRun, dual_nav_config, dual_view_sink, foot_sinks, notice
+from footnav.app.config import Config, apply_capture_settings
+from footnav.app.session import CalibrationLookup, run_unit_session
+from footnav.app.status import Progress, StatusLine, input_handling
+from footnav.device.files.capture import EXPECTED, MCAP_MAGIC, CaptureReplayLink, summarize_capture
+from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
+from footnav.device.unit import OpenShoeUnit, RawImuMode
+from footnav.pipeline.dual_imu.navigator import DualNavigator
+from footnav.pipeline.errors import InputFormatError
+from footnav.pipeline.navigation.navigator import Navigator
+from footnav.pipeline.runner import NavSink
+from footnav.pipeline.smoothing.stepwise import make_navigator
+from footnav.views.outputs import open_session_views
+
+FULL_SPEED_JOIN_SAMPLES = 1000
+"""A replay at full speed passes the IMU samples on in batches of about this many (a captured read
+holds about 30 at 1 kHz): the same estimates, a fraction of the per-batch cost (README "Speed")."""
+REPLAY_PUT_TIMEOUT_S = 60.0
+"""Faster than real time, the pipeline waits for the Rerun loggers rather than dropping samples."""
+
+
+def detect_format(path: Path) -> str:
+    """``footnav-capture`` for our MCAP captures; otherwise raise with what was expected.
+
+    Raises:
+        InputFormatError: missing file, or not a footnav capture (other tools' recordings included).
+    """
+    if not path.exists():
+        raise InputFormatError(f"no such file: {path}")
+    if path.is_dir():
+        raise InputFormatError(f"{path} is a folder; expected {EXPECTED}")
+    with open(path, "rb") as f:
+        head = f.read(8)
+    if head == MCAP_MAGIC:
+        return "footnav-capture"
+    if not head:
+        raise InputFormatError(f"{path} is an empty file; expected {EXPECTED}")
+    kinds = {
+        ".mcap": "not an MCAP file (no MCAP magic bytes)",
+        ".mat": "a MATLAB file",
+        ".csv": "a CSV file",
+        ".txt": "a text file",
+        ".rrd": "a Rerun recording",
+    }
+    what = kinds.get(path.suffix.lower(), "a file of unknown type")
+    raise InputFormatError(f"unsupported format: {path} is {what}; expected {EXPECTED}")
+
+
+@dataclass(frozen=True)
+class ReplayOptions:
+    """What ``footnav replay`` was asked for.
+
+    Attributes:
+        speed: 1.0 = as captured, N = N times faster, ``math.inf`` = as fast as possible.
+        start_s, end_s: window in session seconds (device time since the first sample, the
+            recording's ``imu_time``), exact to the sample.
+        collect: tests: an extra NavSink per foot.
+        tof: pass the unit's ToF readings to the navigator (False: the same capture navigated
+            inertial-only, to measure what the ToF sensors add).
+        stance: stance detector mode with ToF units (None: as recorded in the capture).
+    """
+
+    path: Path
+    config: Config
+    speed: float = math.inf
+    start_s: float = 0.0
+    end_s: float = math.inf
+    save: Path | None = None
+    viewer: bool = True
+    web: bool = False
+    config_is_explicit: bool = False
+    collect: Callable[[str], NavSink] | None = None
+    tof: bool = True
+    stance: str | None = None
+
+
+def run_replay(opts: ReplayOptions) -> int:
+    """Replay a capture; returns the exit code.
+
+    Raises:
+        InputFormatError: the file is not a footnav capture.
+    """
+    detect_format(opts.path)
+    summary = summarize_capture(opts.path)
+    info = summary.info
+    if not info.units:
+        raise InputFormatError(f"{opts.path} declares no unit; expected {EXPECTED}")
+    if not any(summary.rx_bytes.values()):
+        cut = "ends before its first complete chunk of data" if summary.truncated else "holds no data from a unit"
+        raise InputFormatError(f"{opts.path} {cut}; nothing to replay")
+    if any(u.settings.get("mode") == "calibration_raw_imu" for u in info.units):
+        raise InputFormatError(
+            f"{opts.path} is a calibration procedure (raw IMU output); refit it with "
+            f"`footnav calibrate --capture {opts.path}`"
+        )
+    if summary.corrupt_at is not None:
+        notice(
+            f"{opts.path} is corrupt after byte {summary.corrupt_at} of {opts.path.stat().st_size}: "
+            "replaying what comes before"
+        )
+    elif summary.truncated:
+        notice(f"{opts.path} ends mid-record (the writer was killed or the disk was full): replaying what is there")
+    cfg = opts.config
+    feet = info.feet
+    for unit in info.units:
+        nav = unit.settings.get("nav_config")
+        if isinstance(nav, dict) and not opts.config_is_explicit:
+            apply_capture_settings(cfg, nav, f"capture {opts.path.name}")
+        break  # one settings set for all feet (they were one session)
+    rate_of = {u.foot: float(u.settings.get("rate_hz", 1000.0)) for u in info.units}
+    windowed = opts.start_s > 0 or math.isfinite(opts.end_s)
+    print(
+        f"replaying {opts.path} ({', '.join(f'{u.foot}: {u.port}' for u in info.units)}; "
+        f"{summary.duration_s:.1f} s captured) at "
+        f"{'max speed' if math.isinf(opts.speed) else f'{opts.speed:g}x'}"
+        + (f", window {opts.start_s:g}-{opts.end_s:g} s" if windowed else ""),
+        file=sys.stderr,
+    )
+    lever_of = {
+        u.foot: tuple(float(v) for v in u.settings["dual_imu_lever_b_m"])
+        for u in info.units
+        if isinstance(u.settings.get("dual_imu_lever_b_m"), list)
+    }
+    views, notes = open_session_views(
+        save=opts.save,
+        want_viewer=opts.viewer,
+        web=opts.web,
+        feet=feet,
+        recording_id=str(info.session.get("session_id", opts.path.stem)),
+        notice=notice,
+        dual_runs=tuple(lever_of),
+    )
+    for note in notes:
+        print(note, file=sys.stderr)
+    realtime = opts.speed == 1.0
+    status = StatusLine(feet=feet, stream=sys.stderr if realtime else io.StringIO())
+    progress = None if realtime else Progress(f"replay {opts.path.name}")
+    nav_config = cfg.nav_config()
+    clock_origin: list[int] = []
+    runs: list[FootRun] = []
+    links: dict[str, CaptureReplayLink] = {}
+    for k, foot in enumerate(feet):
+        recorded = info.units[feet.index(foot)].settings.get("stance", "inertial")
+        rate_hz = rate_of.get(foot, 1000.0)
+        navigator: Navigator | DualNavigator
+        if foot in lever_of:  # a dual-IMU board: its raw two-IMU stream to the dual-IMU navigator
+            lever = lever_of[foot]
+            navigator = DualNavigator(dual_nav_config(nav_config, (lever[0], lever[1], lever[2])), rate_hz=rate_hz)
+        else:
+            navigator = make_navigator(nav_config, rate_hz, tof=cfg.tof_config(opts.stance or str(recorded)))
+        run = FootRun(foot, opts.path.name, navigator)
+        foot_sinks(run, views, status, two_feet=len(feet) > 1, put_timeout_s=0.0 if realtime else REPLAY_PUT_TIMEOUT_S)
+        if views is not None and isinstance(navigator, DualNavigator):
+            run.sinks.append(dual_view_sink(navigator, views, foot))
+        if opts.collect is not None:
+            run.sinks.append(opts.collect(foot))
+        links[foot] = CaptureReplayLink(
+            opts.path,
+            foot,
+            speed=opts.speed,
+            paced=opts.start_s <= 0,
+            clock_origin=clock_origin,
+            on_progress=progress.update if (progress is not None and k == 0) else None,
+        )
+        runs.append(run)
+    ends = {
+        foot: next((e.get("samples") for e in events if e.get("event") == "end"), None)
+        for foot, events in summary.events.items()
+    }
+
+    def lookup(foot: str) -> CalibrationLookup | None:
+        """The live session asked the unit its MCU id (an ``mcu_id`` event): ask again, from the capture."""
+        if not any(e.get("event") == "mcu_id" for e in summary.events.get(foot, [])):
+            return None
+        folder = calibration_dir(cfg)
+        apply = bool(cfg["calibration.apply"])
+        prefix = f"{foot}: " if len(feet) > 1 else ""
+
+        def find(mcu_id: bytes) -> StoredCalibration | None:
+            return load_calibration(folder, mcu_id) if apply else None
+
+        def report(mcu_id: bytes | None, stored: StoredCalibration | None, note: str) -> None:
+            if apply:
+                notice(prefix + note)
+
+        return CalibrationLookup(find=find, report=report)
+
+    async def session(run: FootRun) -> None:
+        link = links[run.foot]
+        unit = OpenShoeUnit(link)
+        if run.health is not None:
+            run.health.stats = lambda: unit.stats
+        expect = ends.get(run.foot)
+        settings = info.units[feet.index(run.foot)].settings
+        rate_divider = int(settings.get("rate_divider_log2", 0))
+        await run_unit_session(
+            unit,
+            run.navigator,
+            run.sinks,
+            start=True,  # the same handshake as live: the unit's answers are in the capture
+            rate_divider_log2=rate_divider,
+            expect_samples=expect if (isinstance(expect, int) and not windowed) else None,
+            status=status.foot(run.foot),
+            result=run.result,
+            host_clock=link.captured_ns,
+            idle_notice_s=None,
+            window=(opts.start_s, opts.end_s) if windowed else None,
+            on_window=lambda: setattr(link, "paced", True),
+            calibration=lookup(run.foot),
+            extensions=bool(settings.get("extensions", False)),
+            use_ranges=opts.tof,
+            join_samples=FULL_SPEED_JOIN_SAMPLES if math.isinf(opts.speed) else 0,
+            mode=RawImuMode(imu_mask=DUAL_IMU_MASK, rate_divider_log2=rate_divider) if run.foot in lever_of else None,
+        )
+
+    from footnav.app.commands.live import run_feet
+
+    interrupted = False
+    try:
+        asyncio.run(run_feet(runs, session))
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        if realtime:
+            status.finish()
+        elif progress is not None:
+            progress.update(1, 1)
+            progress.finish()
+        if views is not None:
+            for note in views.close():
+                notice(note)
+    if interrupted:
+        print("interrupted: the recording was closed", file=sys.stderr)
+    corrupt = [link.state.corrupt_at for link in links.values() if link.state.corrupt_at is not None]
+    if corrupt and summary.corrupt_at is None:  # found by the replay itself (the index looked whole)
+        notice(
+            f"{opts.path} is corrupt after byte {min(corrupt)} of {opts.path.stat().st_size}: "
+            "replayed what comes before"
+        )
+    for run in runs:
+        prefix = f"{run.foot}: " if len(runs) > 1 else ""
+        st = run.navigator.stats
+        lost = run.result.link.lost_packets if run.result.link is not None else 0
+        print(
+            f"{prefix}samples navigated: {st.samples_out} of {run.result.samples_received} replayed "
+            f"(lost packets: {lost}); distance {status.foot(run.foot).distance_m:.2f} m"
+            + (f"; {handled}" if (handled := input_handling(st)) else "")
+        )
+    return 0

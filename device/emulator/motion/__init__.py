@@ -1,0 +1,1 @@
+"""The emulated walker: courses, floors, and the motion of one instrumented foot."""

@@ -1,0 +1,1 @@
+"""Files: footnav's captures, and the recordings of other tools."""

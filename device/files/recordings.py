@@ -1,0 +1,349 @@
+"""Loaders for recordings made by other tools: PyShoe ``.mat``, x-io CSV, OpenShoe text, generic CSV.
+
+Each loader converts to SI units once, here, and returns a :class:`Recording`; nothing downstream
+knows which tool wrote the file. Ground truth, where a format carries it, is converted to footnav's
+right-handed, z-up frame. Loading is the only job of this module: it reads files, computes nothing.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from footnav.pipeline.errors import InputFormatError
+from numpy.typing import NDArray
+
+F64 = NDArray[np.float64]
+G0_MPS2 = 9.80665
+DEG = math.pi / 180.0
+
+
+@dataclass(frozen=True)
+class Recording:
+    """IMU samples of one recording, in SI units, with what is known about the truth.
+
+    Attributes:
+        name: file stem.
+        format: loader key (``pyshoe``, ``xio``, ``openshoe``, ``csv``).
+        t_s: (n,) sample times, s, as recorded (may hold duplicates and jitter).
+        acc_b_mps2, gyr_b_radps: (n, 3) body-frame specific force and angular rate.
+        rate_hz: nominal rate, from the median sample interval.
+        profile: name of the unit profile (``footnav.pipeline.navigation.profiles``) that describes the sensor.
+        gt_pos_m: (n, 3) ground-truth position per sample (right-handed, z up), or None.
+        closed_loop: the walker returned to the start (loop-closure error is meaningful).
+        notes: facts about the file a person should know (handedness conversions, dropped rows).
+    """
+
+    name: str
+    format: str
+    t_s: F64
+    acc_b_mps2: F64
+    gyr_b_radps: F64
+    rate_hz: float
+    profile: str
+    gt_pos_m: F64 | None = None
+    closed_loop: bool = False
+    notes: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+
+def _nominal_rate(t_s: F64) -> float:
+    dt = np.diff(t_s)
+    dt = dt[dt > 0]
+    if dt.size == 0:
+        raise InputFormatError("the recording's time stamps never increase; expected time in seconds")
+    return float(1.0 / np.median(dt))
+
+
+def load_pyshoe_mat(path: Path) -> Recording:
+    """PyShoe VICON trial (Wagstaff, Peretroukhin, Kelly 2019; doi 10.21227/v1z6-9z84).
+
+    Fields ``ts`` (1×n, s), ``imu`` (n×6: m/s², rad/s), ``gt`` (n×3, m). The motion-capture frame is
+    left-handed (north, east, up), so y is negated here to make it right-handed z-up.
+    """
+    mat = _loadmat_isolated(path)
+    missing = [k for k in ("ts", "imu") if k not in mat]
+    if missing:
+        raise InputFormatError(f"{path}: a PyShoe trial needs fields ts and imu; missing {', '.join(missing)}")
+    t = _mat_f64(mat, "ts", path).ravel()
+    imu = _mat_f64(mat, "imu", path)
+    if t.size < 2 or imu.ndim != 2 or imu.shape != (t.size, 6):
+        raise InputFormatError(
+            f"{path}: expected ts of n >= 2 times and imu of shape (n, 6), got {t.shape}, {imu.shape}"
+        )
+    gt = None
+    notes = []
+    if "gt" in mat:
+        gt = _mat_f64(mat, "gt", path)
+        if gt.ndim == 2 and gt.shape == (t.size, 3):
+            gt = gt.copy()
+            gt[:, 1] *= -1.0
+            notes.append("ground truth converted from the left-handed VICON frame (y negated)")
+        else:
+            gt = None
+            notes.append("ground truth is not one (x, y, z) row per IMU sample; ignored")
+    return Recording(
+        name=path.stem,
+        format="pyshoe",
+        t_s=t - t[0],
+        acc_b_mps2=imu[:, :3].copy(),
+        gyr_b_radps=imu[:, 3:].copy(),
+        rate_hz=_nominal_rate(t),
+        profile="gx3",
+        gt_pos_m=gt,
+        notes=notes,
+    )
+
+
+def _loadmat_isolated(path: Path) -> dict[str, object]:
+    """``scipy.io.loadmat`` in a child process (``footnav.device.files.mat_reader``): its C reader can crash on a
+    corrupt file, which must be an error message, not a crash.
+
+    Raises:
+        InputFormatError: the file is not readable as a MATLAB .mat file, or crashed the reader.
+    """
+    from footnav.device.files.mat_reader import ReaderCrashedError, load_mat
+
+    try:
+        return load_mat(path)
+    except ReaderCrashedError:
+        raise InputFormatError(f"{path}: corrupt .mat file (it crashed the MATLAB reader)") from None
+    except Exception as exc:  # scipy raises many kinds on a corrupt file
+        raise InputFormatError(
+            f"{path}: not a MATLAB .mat file readable as a PyShoe trial ({type(exc).__name__}: {exc})"
+        ) from None
+
+
+def _mat_f64(mat: dict[str, object], name: str, path: Path) -> F64:
+    try:
+        return np.asarray(mat[name], dtype=np.float64)
+    except (ValueError, TypeError):
+        raise InputFormatError(f"{path}: field {name} is not numeric") from None
+
+
+XIO_COLUMNS = (
+    "Time (s)",
+    "Gyroscope X (deg/s)",
+    "Gyroscope Y (deg/s)",
+    "Gyroscope Z (deg/s)",
+    "Accelerometer X (g)",
+    "Accelerometer Y (g)",
+    "Accelerometer Z (g)",
+)
+
+
+def load_xio_csv(path: Path) -> Recording:
+    """x-io Technologies CSV (``Time (s)``, gyroscope in °/s, accelerometer in g).
+
+    As in ``xioTechnologies/Gait-Tracking``'s sample data. Time stamps are kept as recorded
+    (jittery, with duplicates); the navigator handles non-positive intervals.
+    """
+    header = _csv_header(path)
+    if tuple(h.strip() for h in header[: len(XIO_COLUMNS)]) != XIO_COLUMNS:
+        raise InputFormatError(f"{path}: expected an x-io CSV with columns {', '.join(XIO_COLUMNS)}; got {header}")
+    data = _read_numeric_csv(path, skip=1, ncols=7)
+    t = data[:, 0]
+    return Recording(
+        name=path.stem,
+        format="xio",
+        t_s=t - t[0],
+        acc_b_mps2=data[:, 4:7] * G0_MPS2,
+        gyr_b_radps=data[:, 1:4] * DEG,
+        rate_hz=_nominal_rate(t),
+        profile="generic",
+        closed_loop=True,
+        notes=["x-io sample walk: the foot ends where it started"],
+    )
+
+
+def load_openshoe_txt(path: Path) -> Recording:
+    """OpenShoe inertial log (``Measurement_*/data_inert.txt``, MicroStrain 3DM-GX2 at 250 Hz).
+
+    Two header lines, then rows ``0xcb a_x a_y a_z [g] ar_x ar_y ar_z [rad/s] counter checksum Nr
+    filtered_ts unfiltered_ts predicted_ts freq m_x m_y m_z``. The filtered time stamp is used.
+    """
+    rows: list[list[float]] = []
+    skipped = 0
+    with path.open("r", encoding="latin-1") as f:
+        lines = f.readlines()
+    if not any("a_x [g]" in ln for ln in lines[:5]):
+        raise InputFormatError(f"{path}: expected an OpenShoe inertial log (header with 'a_x [g]')")
+    for line in lines:
+        parts = line.split()
+        if not parts or parts[0].lower() != "0xcb":
+            continue
+        try:
+            rows.append([float(parts[i]) for i in (1, 2, 3, 4, 5, 6, 10)])
+        except (ValueError, IndexError):
+            skipped += 1
+    if len(rows) < 2:
+        raise InputFormatError(f"{path}: no data rows starting with 0xcb")
+    data = np.array(rows)
+    t = data[:, 6]
+    notes = ["OpenShoe walk: the walker returned to the start within ±1 cm"]
+    if skipped:
+        notes.append(f"{skipped} malformed rows skipped")
+    return Recording(
+        name=path.stem,
+        format="openshoe",
+        t_s=t - t[0],
+        acc_b_mps2=data[:, 0:3] * G0_MPS2,
+        gyr_b_radps=data[:, 3:6].copy(),
+        rate_hz=_nominal_rate(t),
+        profile="gx3",
+        closed_loop=True,
+        notes=notes,
+    )
+
+
+ACC_UNITS: Mapping[str, float] = {"m/s2": 1.0, "g": G0_MPS2, "mg": G0_MPS2 / 1000.0}
+GYR_UNITS: Mapping[str, float] = {"rad/s": 1.0, "deg/s": DEG, "mrad/s": 1e-3}
+TIME_UNITS: Mapping[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+
+
+@dataclass(frozen=True)
+class CsvMapping:
+    """Which columns of a generic CSV hold what, and in which units.
+
+    Attributes:
+        time: column name of the time stamp; acc, gyr: three column names each.
+        time_unit, acc_unit, gyr_unit: keys of TIME_UNITS, ACC_UNITS, GYR_UNITS.
+        profile: unit profile of the sensor; closed_loop: the walk ends at its start.
+    """
+
+    time: str = "t"
+    acc: tuple[str, str, str] = ("ax", "ay", "az")
+    gyr: tuple[str, str, str] = ("gx", "gy", "gz")
+    time_unit: str = "s"
+    acc_unit: str = "m/s2"
+    gyr_unit: str = "rad/s"
+    profile: str = "generic"
+    closed_loop: bool = False
+
+    @staticmethod
+    def parse(spec: str) -> CsvMapping:
+        """From ``key=value`` pairs separated by commas, e.g.
+        ``time=ts:ms,acc=ax;ay;az:g,gyr=wx;wy;wz:deg/s,profile=mpu6500x4``."""
+        fields: dict[str, object] = {}
+        for item in filter(None, (s.strip() for s in spec.split(","))):
+            key, _, value = item.partition("=")
+            names, _, unit = value.partition(":")
+            if key == "time":
+                fields["time"] = names
+                if unit:
+                    fields["time_unit"] = unit
+            elif key in ("acc", "gyr"):
+                cols = tuple(names.split(";"))
+                if len(cols) != 3:
+                    raise InputFormatError(f"--columns {key}= needs three column names separated by ';', got {names!r}")
+                fields[key] = cols
+                if unit:
+                    fields[f"{key}_unit"] = unit
+            elif key == "profile":
+                fields["profile"] = value
+            elif key == "closed_loop":
+                fields["closed_loop"] = value.lower() in ("1", "true", "yes")
+            else:
+                raise InputFormatError(f"unknown --columns key {key!r}; use time, acc, gyr, profile, closed_loop")
+        return CsvMapping(**fields)  # type: ignore[arg-type]
+
+
+def load_generic_csv(path: Path, mapping: CsvMapping | None = None) -> Recording:
+    """A CSV with a header row; ``mapping`` says which columns and units (default t, ax.., gx.. in SI)."""
+    m = mapping or CsvMapping()
+    for unit, table, what in (
+        (m.time_unit, TIME_UNITS, "time"),
+        (m.acc_unit, ACC_UNITS, "acc"),
+        (m.gyr_unit, GYR_UNITS, "gyr"),
+    ):
+        if unit not in table:
+            raise InputFormatError(f"unknown {what} unit {unit!r}; known: {', '.join(table)}")
+    header = [h.strip() for h in _csv_header(path)]
+    wanted = [m.time, *m.acc, *m.gyr]
+    missing = [c for c in wanted if c not in header]
+    if missing:
+        raise InputFormatError(f"{path}: columns {', '.join(missing)} not found; the header has {', '.join(header)}")
+    data = _read_numeric_csv(path, skip=1, ncols=len(header))[:, [header.index(c) for c in wanted]]
+    t = data[:, 0] * TIME_UNITS[m.time_unit]
+    return Recording(
+        name=path.stem,
+        format="csv",
+        t_s=t - t[0],
+        acc_b_mps2=data[:, 1:4] * ACC_UNITS[m.acc_unit],
+        gyr_b_radps=data[:, 4:7] * GYR_UNITS[m.gyr_unit],
+        rate_hz=_nominal_rate(t),
+        profile=m.profile,
+        closed_loop=m.closed_loop,
+    )
+
+
+def _csv_header(path: Path) -> list[str]:
+    try:
+        with path.open("r", newline="", encoding="utf-8-sig") as f:
+            return next(csv.reader(f), [])
+    except UnicodeDecodeError:
+        raise InputFormatError(f"{path}: not a text CSV file") from None
+
+
+def _read_numeric_csv(path: Path, skip: int, ncols: int) -> F64:
+    try:
+        with warnings.catch_warnings():  # "no data" is reported below, as an error
+            warnings.simplefilter("ignore", UserWarning)
+            data = np.loadtxt(path, delimiter=",", skiprows=skip, ndmin=2)
+    except ValueError as exc:
+        raise InputFormatError(f"{path}: non-numeric values in the data rows ({exc})") from None
+    if data.shape[1] < ncols or data.shape[0] < 2:
+        raise InputFormatError(f"{path}: expected at least 2 rows of {ncols} numeric columns, got {data.shape}")
+    out: F64 = data
+    return out
+
+
+LOADERS: dict[str, Callable[[Path], Recording]] = {
+    "pyshoe": load_pyshoe_mat,
+    "xio": load_xio_csv,
+    "openshoe": load_openshoe_txt,
+    "csv": load_generic_csv,
+}
+
+
+def detect_format(path: Path) -> str:
+    """Loader key for a file, from its content (magic bytes and header), not only its name.
+
+    Raises:
+        InputFormatError: the file is none of the known formats (the message lists them).
+    """
+    try:
+        with path.open("rb") as f:
+            head = f.read(512)
+    except OSError as exc:
+        raise InputFormatError(f"cannot read {path}: {exc.strerror}") from None
+    if head.startswith(b"MATLAB 5.0 MAT-file"):
+        return "pyshoe"
+    text = head.decode("latin-1")
+    if "a_x [g]" in text or "Inertial data" in text:
+        return "openshoe"
+    if text.startswith("Time (s),Gyroscope X (deg/s)"):
+        return "xio"
+    if path.suffix.lower() == ".csv":
+        return "csv"
+    raise InputFormatError(
+        f"{path}: unknown recording format; expected a PyShoe .mat, an x-io CSV, an OpenShoe "
+        "data_inert.txt, or a CSV with a header row (give the columns with --columns)"
+    )
+
+
+def load_recording(path: Path, fmt: str | None = None, mapping: CsvMapping | None = None) -> Recording:
+    """Load ``path`` with the loader for ``fmt`` (detected from the file when None)."""
+    key = fmt or detect_format(path)
+    if key not in LOADERS:
+        raise InputFormatError(f"unknown format {key!r}; known: {', '.join(LOADERS)}")
+    if key == "csv":
+        return load_generic_csv(path, mapping)
+    return LOADERS[key](path)

@@ -1,0 +1,267 @@
+"""Normal-IMU packets (commands 0x40/0x41), vectorised; device tick and packet-counter unwrapping.
+
+34-byte packet, all fields big-endian (protocol-openshoe.md sections 4.1, 4.2 and 5.3)::
+
+    AA | pkt# uint16 | N = 0x1C | ts uint32 (64 MHz ticks) | ax ay az float32 [m/s²]
+       | gx gy gz float32 [rad/s] | chk uint16
+
+Sources: ``hcarlsso/openshoe-framework:src/external_interfaces/response_functions.c`` (``normal_imu``),
+``oblu-iot/ObluScope-Java:src/io/oblu/commn/ParseNormalImu.java`` (DATA_LEN = 34, payload 28).
+Encoding many packets at once is for the emulator; decoding many payloads at once is for the host.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+from footnav.pipeline.samples import diff_after
+from numpy.typing import NDArray
+
+TICK_HZ: Final = 64e6
+"""IMU_TS is the CPU cycle counter at 64 MHz (``conf_clock.h`` CLOCK_FREQ); it wraps every ≈67.1 s."""
+TICK_WRAP: Final = 1 << 32
+COUNTER_WRAP: Final = 1 << 16
+
+PAYLOAD_LEN: Final = 28
+PACKET_LEN: Final = PAYLOAD_LEN + 6
+
+PAYLOAD_DTYPE: Final = np.dtype([("ts", ">u4"), ("acc", ">f4", (3,)), ("gyr", ">f4", (3,))])
+"""One 28-byte payload."""
+PACKET_DTYPE: Final = np.dtype(
+    [("sync", "u1"), ("number", ">u2"), ("length", "u1"), ("payload", PAYLOAD_DTYPE), ("chk", ">u2")]
+)
+"""One whole 34-byte packet."""
+
+
+@dataclass(frozen=True, slots=True)
+class NormalImuArrays:
+    """Decoded payloads (struct of arrays).
+
+    Attributes:
+        ticks: (n,) uint32 device timestamps, 64 MHz ticks, wrapping.
+        acc_b_mps2: (n, 3) specific force, body frame, m/s².
+        gyr_b_radps: (n, 3) angular rate, body frame, rad/s.
+    """
+
+    ticks: NDArray[np.uint32]
+    acc_b_mps2: NDArray[np.float64]
+    gyr_b_radps: NDArray[np.float64]
+
+
+def decode_payloads(payloads: bytes | bytearray | memoryview) -> NormalImuArrays:
+    """Decode the concatenation of n 28-byte payloads (one ``np.frombuffer``).
+
+    Raises:
+        ValueError: the length is not a multiple of 28.
+    """
+    if len(payloads) % PAYLOAD_LEN:
+        raise ValueError(f"normal-IMU payloads are {PAYLOAD_LEN} bytes each; got {len(payloads)} bytes")
+    rec = np.frombuffer(payloads, dtype=PAYLOAD_DTYPE)
+    return NormalImuArrays(
+        ticks=rec["ts"].astype(np.uint32),
+        acc_b_mps2=rec["acc"].astype(np.float64),
+        gyr_b_radps=rec["gyr"].astype(np.float64),
+    )
+
+
+def seconds_to_ticks(t_s: NDArray[np.float64], tick0: int) -> NDArray[np.uint32]:
+    """Device ticks for sample times ``t_s`` (n,), s, with ``t_s[0]`` at tick ``tick0``, wrapped to uint32."""
+    rel = np.rint((np.asarray(t_s, dtype=np.float64) - t_s[0]) * TICK_HZ).astype(np.int64)
+    return ((rel + tick0) % TICK_WRAP).astype(np.uint32)
+
+
+def encode_packets(
+    numbers: NDArray[np.integer],
+    ticks: NDArray[np.integer],
+    acc_b_mps2: NDArray[np.floating],
+    gyr_b_radps: NDArray[np.floating],
+) -> bytes:
+    """Encode n whole packets, headers and checksums included, as one ``bytes`` of length 34·n.
+
+    Args:
+        numbers: (n,) package numbers; taken modulo 2**16.
+        ticks: (n,) timestamps in 64 MHz ticks; taken modulo 2**32.
+        acc_b_mps2: (n, 3) specific force, m/s² (sent as float32).
+        gyr_b_radps: (n, 3) angular rate, rad/s (sent as float32).
+    """
+    n = len(numbers)
+    rec = np.empty(n, dtype=PACKET_DTYPE)
+    rec["sync"] = 0xAA
+    rec["number"] = np.asarray(numbers, dtype=np.int64) % COUNTER_WRAP
+    rec["length"] = PAYLOAD_LEN
+    rec["payload"]["ts"] = np.asarray(ticks, dtype=np.int64) % TICK_WRAP
+    rec["payload"]["acc"] = acc_b_mps2
+    rec["payload"]["gyr"] = gyr_b_radps
+    raw = rec.view(np.uint8).reshape(n, PACKET_LEN)
+    rec["chk"] = raw[:, : PACKET_LEN - 2].sum(axis=1, dtype=np.uint32) & 0xFFFF
+    return rec.tobytes()
+
+
+class TickUnwrapper:
+    """Turns the wrapping uint32 64 MHz tick counter into increasing float64 seconds.
+
+    Every step is taken modulo 2**32, so the result never goes backwards and a gap shorter than one
+    wrap (≈67 s) is measured correctly. Time 0 is tick 0 of the first sample's wrap (the first sample
+    is at ``ticks[0] / 64e6`` s). ``lior88/ProjectB:Recordings/log_mimu_data.m`` unwraps the same way.
+    """
+
+    def __init__(self) -> None:
+        self._last_raw: int | None = None
+        self._last_total = 0
+        self.wraps = 0
+        """Wraps of the counter seen so far."""
+
+    def update(self, ticks: NDArray[np.integer]) -> NDArray[np.float64]:
+        """Return (n,) device time in seconds for the next ``ticks`` (n,) in stream order."""
+        raw = np.asarray(ticks, dtype=np.int64)
+        if raw.size == 0:
+            return np.empty(0, dtype=np.float64)
+        if self._last_raw is None:
+            self._last_raw = int(raw[0])
+            self._last_total = int(raw[0])
+        steps = diff_after(self._last_raw, raw)
+        wrapped = steps < 0
+        self.wraps += int(np.count_nonzero(wrapped))
+        steps[wrapped] += TICK_WRAP
+        total = self._last_total + np.cumsum(steps)
+        self._last_raw = int(raw[-1])
+        self._last_total = int(total[-1])
+        return total / TICK_HZ
+
+
+class CounterTracker:
+    """Unwraps the uint16 package number and accounts for every number: received, lost, repeated, late.
+
+    Each step is taken as a signed difference modulo 2**16, so the unwrapped counter is right across
+    wraps, gaps of under 32768 packets, repeats and packets that arrive after their successors. The
+    accounting keeps the highest number seen and the set of numbers below it not yet received
+    (within ``window`` of it): a number above the highest opens a gap (``lost`` grows by its size);
+    a missing number arriving late closes its place in the gap (``lost`` shrinks, ``out_of_order``
+    grows); a number already received is a duplicate (a lossless-mode resend, or a repeat on the
+    wire). Gaps that fall more than ``window`` behind the highest number stay lost for good.
+    A stream of consecutive numbers takes one vectorised comparison, no per-packet work.
+    """
+
+    def __init__(self, window: int = 4096) -> None:
+        self._window = window
+        self._last_raw: int | None = None
+        self._last_total = 0
+        self._high = 0
+        self._missing: set[int] = set()
+        self._expired = 0
+        self.lost = 0
+        """Numbers below the highest one received that have not arrived (yet)."""
+        self.duplicates = 0
+        """Arrivals of a number already received."""
+        self.out_of_order = 0
+        """Numbers that arrived after a higher one (they filled a gap)."""
+
+    def continues(self, numbers: NDArray[np.integer]) -> bool:
+        """True if ``numbers`` (n,) are the next numbers in sequence (nothing lost, repeated or late)."""
+        raw = np.asarray(numbers, dtype=np.int64)
+        if raw.size == 0 or self._last_raw is None or self._last_total != self._high:
+            return False
+        return bool(np.all(diff_after(self._last_raw, raw) % COUNTER_WRAP == 1))
+
+    def update(self, numbers: NDArray[np.integer]) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+        """Track the next package numbers (n,), in arrival order.
+
+        Returns:
+            (unwrapped counters (n,) int64, duplicate mask (n,): True where the number had been
+            received before).
+        """
+        raw = np.asarray(numbers, dtype=np.int64)
+        dup = np.zeros(raw.size, dtype=np.bool_)
+        if raw.size == 0:
+            return np.empty(0, dtype=np.int64), dup
+        if self._last_raw is None:
+            self._last_raw = int(raw[0]) - 1
+            self._last_total = self._high = int(raw[0]) - 1
+        steps = (diff_after(self._last_raw, raw) + COUNTER_WRAP // 2) % COUNTER_WRAP - COUNTER_WRAP // 2
+        total = self._last_total + np.cumsum(steps)
+        self._last_raw = int(raw[-1])
+        self._last_total = int(total[-1])
+        if total[0] == self._high + 1 and np.all(steps[1:] == 1):
+            self._high = int(total[-1])
+        else:
+            self._account(total, dup)
+        missing = self._missing
+        if missing and min(missing) < self._high - self._window:
+            old = {m for m in missing if m < self._high - self._window}
+            missing -= old
+            self._expired += len(old)
+        self.lost = self._expired + len(missing)
+        return total, dup
+
+    def _account(self, total: NDArray[np.int64], dup: NDArray[np.bool_]) -> None:
+        """The per-packet bookkeeping of a read that is not one consecutive run."""
+        high, missing = self._high, self._missing
+        for i, t in enumerate(total.tolist()):
+            if t > high:
+                first_missing = max(high + 1, t - self._window)
+                self._expired += first_missing - (high + 1)
+                missing.update(range(first_missing, t))
+                high = t
+            elif t in missing:
+                missing.remove(t)
+                self.out_of_order += 1
+            else:
+                dup[i] = True
+                self.duplicates += 1
+        self._high = high
+
+
+def frame_payload_rows(numbers: NDArray[np.integer], rows: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """Frame m equal-length payloads at once: ``AA hi lo N payload chk_hi chk_lo`` per row.
+
+    Args:
+        numbers: (m,) package numbers, taken modulo 2**16.
+        rows: (m, L) payload bytes, L <= 255.
+
+    Returns:
+        (m, L + 6) packet bytes; ``.tobytes()`` is the byte stream.
+    """
+    rows = np.asarray(rows, dtype=np.uint8)
+    m, length = rows.shape
+    if length > 0xFF:
+        raise ValueError(f"a data packet holds at most 255 payload bytes, got {length}")
+    out = np.empty((m, length + 6), dtype=np.uint8)
+    num = np.asarray(numbers, dtype=np.int64) % COUNTER_WRAP
+    out[:, 0] = 0xAA
+    out[:, 1] = num >> 8
+    out[:, 2] = num & 0xFF
+    out[:, 3] = length
+    out[:, 4 : 4 + length] = rows
+    chk = out[:, : length + 4].sum(axis=1, dtype=np.uint32) & 0xFFFF
+    out[:, length + 4] = chk >> 8
+    out[:, length + 5] = chk & 0xFF
+    return out
+
+
+class SharedTickClock:
+    """Unwraps 64 MHz ticks from several packet kinds sharing one device clock.
+
+    Unlike :class:`TickUnwrapper`, each step is taken as a *signed* difference modulo 2**32, so ticks
+    from interleaved outputs (an IMU sample, then a ToF reading stamped a little earlier) may step back
+    slightly; the price is that a silence longer than half a wrap (≈33.5 s) is ambiguous. Feed ticks
+    in arrival order, all kinds through the same instance: every kind then shares one time origin.
+    """
+
+    def __init__(self) -> None:
+        self._last_raw: int | None = None
+        self._last_total = 0
+
+    def update(self, ticks: NDArray[np.integer]) -> NDArray[np.float64]:
+        """Return (n,) device time in seconds for ``ticks`` (n,) in arrival order."""
+        raw = np.asarray(ticks, dtype=np.int64)
+        if raw.size == 0:
+            return np.empty(0, dtype=np.float64)
+        if self._last_raw is None:
+            self._last_raw = self._last_total = int(raw[0])
+        steps = (diff_after(self._last_raw, raw) + TICK_WRAP // 2) % TICK_WRAP - TICK_WRAP // 2
+        total = self._last_total + np.cumsum(steps)
+        self._last_raw = int(raw[-1])
+        self._last_total = int(total[-1])
+        return total / TICK_HZ

@@ -1,0 +1,1 @@
+"""Aiding beyond zero velocity: the ToF foot-height measurement and the barometer."""

@@ -1,0 +1,61 @@
+"""Barometer readings and pressure altitude: decoded, shown, and not used in estimation.
+
+Pressure altitude (ISA troposphere, ICAO Doc 7488): h = 44330.77 m · (1 − (p / p_ref)^0.190263),
+here relative to the first valid reading of the session (p_ref), so it shows height changes.
+
+Why the filter does not use it: footnav's ToF aiding already follows floor changes tread by tread
+(``footnav.pipeline.aiding.tof``), and a barometer's relative noise and drift are coarse next to it: a
+BMP280-class sensor has 0.12 hPa relative accuracy (about 1 m) and its reading moves with doors,
+ventilation and weather by several hPa an hour (Bosch BST-BMP280-DS001); a 16 cm riser is 0.02 hPa.
+It could tell which floor of a building a walk ends on after a lift ride (no steps for the ToF to
+see); that is not implemented.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class PressureBatch:
+    """Barometer readings: t_s (m,) device time, s; pressure_pa (m,) (NaN when invalid)."""
+
+    t_s: F64
+    pressure_pa: F64
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+
+@dataclass(frozen=True, slots=True)
+class PressureAltitude:
+    """Pressure altitude relative to the session's first valid reading: t_s (m,), altitude_m (m,)."""
+
+    t_s: F64
+    altitude_m: F64
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+
+class PressureAltimeter:
+    """Pressure altitude of a stream of barometer readings (module docstring)."""
+
+    def __init__(self) -> None:
+        self.p_ref_pa = math.nan
+
+    def update(self, readings: PressureBatch) -> PressureAltitude:
+        p = np.asarray(readings.pressure_pa, dtype=np.float64)
+        if not math.isfinite(self.p_ref_pa):
+            ok = np.flatnonzero(np.isfinite(p) & (p > 0))
+            if ok.size:
+                self.p_ref_pa = float(p[ok[0]])
+        with np.errstate(invalid="ignore"):
+            alt = 44330.77 * (1.0 - (p / self.p_ref_pa) ** 0.190263)
+        return PressureAltitude(np.asarray(readings.t_s, dtype=np.float64), alt)

@@ -1,0 +1,1 @@
+"""Field calibration of the IMU: the accelerometer and gyroscope model, and the guided procedure."""

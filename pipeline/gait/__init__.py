@@ -1,0 +1,1 @@
+"""Gait quantities from a navigation solution: steps, foot clearance."""
