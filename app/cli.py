@@ -10,6 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from footnav.app.choices import AXIS_ERRORS, IMU_GRADES, PATHS, PROFILES, RECORDING_FORMATS
 from footnav.pipeline.errors import FootnavError
 
 if TYPE_CHECKING:
@@ -48,8 +49,6 @@ def _add_stance_arg(p: argparse.ArgumentParser, *, default: str | None) -> None:
 
 
 def _add_config_args(p: argparse.ArgumentParser, *, profile: bool = True) -> None:
-    from footnav.pipeline.navigation.profiles import PROFILES
-
     p.add_argument(
         "--config", type=Path, metavar="FILE", help="configuration file (default: ./footnav.toml if present)"
     )
@@ -57,7 +56,7 @@ def _add_config_args(p: argparse.ArgumentParser, *, profile: bool = True) -> Non
         p.add_argument(
             "--profile",
             metavar="NAME",
-            help=f"unit noise profile: {', '.join(sorted(PROFILES))} or [profiles.NAME]",
+            help=f"unit noise profile: {', '.join(PROFILES)} or [profiles.NAME]",
         )
 
 
@@ -84,9 +83,7 @@ def _lever(values: list[float] | None) -> tuple[float, float, float] | None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from footnav.app.commands.demo import PATHS
-    from footnav.device.emulator.sensors.imu_errors import AXIS_ERRORS, IMU_GRADES
-
+    """The whole parser; it imports no numerics, Rerun or command module (those load when a command runs)."""
     parser = argparse.ArgumentParser(prog="footnav", description="Foot-mounted inertial navigation, live in Rerun.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug detail to stderr")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -101,13 +98,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     demo.add_argument(
         "--grade",
-        choices=sorted(IMU_GRADES),
+        choices=IMU_GRADES,
         default=None,
         help="emulated sensor grade (default mpu6500x4; icm20948 with --dual-imu)",
     )
     demo.add_argument(
         "--axis-errors",
-        choices=sorted(AXIS_ERRORS),
+        choices=AXIS_ERRORS,
         default=None,
         help="scale-factor and cross-axis errors of the emulated IMU (default none; with --tof "
         "gyro-bias-calibrated, the multi-sensor platform's unit: its gyroscope had only its bias calibrated and "
@@ -273,9 +270,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_smooth_arg(evaluate)
     _add_levels_arg(evaluate)
 
-    from footnav.app.experiments import add_experiment_parsers
-
-    add_experiment_parsers(sub)
+    # the experiments' own options are parsed by run_experiment, which imports their modules
+    experiment = sub.add_parser(
+        "experiment", add_help=False, help="run a reproducible emulator experiment and print its table"
+    )
+    experiment.set_defaults(experiment_argv=[])
 
     config = sub.add_parser("config", help="show the effective configuration and where each value came from")
     _add_config_args(config)
@@ -286,16 +285,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_recording_args(parser: argparse.ArgumentParser) -> None:
-    from footnav.device.files.recordings import LOADERS
-    from footnav.pipeline.navigation.profiles import PROFILES
-
-    parser.add_argument("--format", choices=sorted(LOADERS), help="recording format (default: detected from the file)")
+    parser.add_argument(
+        "--format", choices=RECORDING_FORMATS, help="recording format (default: detected from the file)"
+    )
     parser.add_argument(
         "--columns",
         metavar="SPEC",
         help="for a generic CSV: time=COL[:s|ms|us|ns],acc=X;Y;Z[:m/s2|g|mg],gyr=X;Y;Z[:rad/s|deg/s],profile=NAME",
     )
-    parser.add_argument("--profile", choices=sorted(PROFILES), help="unit profile (default: the format's sensor)")
+    parser.add_argument("--profile", choices=PROFILES, help="unit profile (default: the format's sensor)")
     _add_smooth_arg(parser)
     _add_levels_arg(parser)
 
@@ -506,15 +504,20 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _experiment(args: argparse.Namespace) -> int:
-    from footnav.app.experiments import run_experiment
+    from footnav.app.experiments import experiment_parser, run_experiment
 
-    return run_experiment(args)
+    return run_experiment(experiment_parser().parse_args(args.experiment_argv))
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``footnav`` console script."""
     argv = sys.argv[1:] if argv is None else argv
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args, rest = parser.parse_known_args(argv)
+    if args.command == "experiment":  # its own parser, built when it runs
+        args.experiment_argv = rest
+    elif rest:
+        parser.error(f"unrecognized arguments: {' '.join(rest)}")
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="footnav: %(message)s")
     if not args.verbose:  # sessions report link events themselves (terminal, recording, capture)
         logging.getLogger("footnav.device.links.reconnecting").setLevel(logging.ERROR)

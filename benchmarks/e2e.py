@@ -441,7 +441,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = ap.parse_args(argv)
 
-    from benchmarks.run import machine
+    from benchmarks.machine import machine
 
     print("footnav end-to-end benchmark\n")
     for key, value in machine():

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -24,7 +23,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import numba
 import numpy as np
 from footnav.device.emulator.motion.gait import simulate_walk
 from footnav.device.emulator.sensors.imu_errors import corrupt
@@ -42,6 +40,7 @@ from footnav.pipeline.samples import ImuBatch
 from footnav.pipeline.smoothing.stepwise import StepSmoothingNavigator
 from footnav.pipeline.stance.detectors import StreamingDetector
 
+from benchmarks.machine import machine
 from benchmarks.numpy_filter import run_filter_numpy
 
 RATE_HZ = 1000.0
@@ -74,29 +73,6 @@ def _time(name: str, samples: int, fn: Callable[[], object], repeats: int) -> Ti
         wall.append(time.perf_counter() - w0)
         cpu.append(time.process_time() - c0)
     return Timing(name, samples, min(wall), min(cpu))
-
-
-def machine() -> list[tuple[str, str]]:
-    """What the figures were measured on."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    cores = os.cpu_count() or 0
-    affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else cores
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    return [
-        ("CPU", cpu),
-        ("cores", f"{cores} logical ({affinity} usable by this process); estimators use one"),
-        ("load average (1 min)", f"{load:.2f} at start"),
-        ("OS", platform.platform()),
-        ("Python", platform.python_version()),
-        ("numpy / numba", f"{np.__version__} / {numba.__version__}"),
-    ]
 
 
 _COMPILE_PROBE = """

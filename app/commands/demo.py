@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 from footnav.app import heap
+from footnav.app.choices import PATHS
 from footnav.app.commands.live import (
     FOOT_START_OFFSET_M,
     FootRun,
@@ -63,7 +64,6 @@ from footnav.pipeline.smoothing.stepwise import make_navigator
 from footnav.views.outputs import open_session_views
 from numpy.typing import NDArray
 
-PATHS = ("rectangle", "line", "figure8", "stairs")
 DEMO_PUT_TIMEOUT_S = 60.0
 """At a pace other than real time, how long a batch may wait for room in a Rerun logger's queue."""
 # the profile the filter assumes for each emulated sensor grade

@@ -29,12 +29,15 @@ def experiment_modules() -> dict[str, ModuleType]:
     return found
 
 
-def add_experiment_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """One sub-command per experiment under ``footnav experiment``."""
-    parser = sub.add_parser("experiment", help="run a reproducible emulator experiment and print its table")
+def experiment_parser() -> argparse.ArgumentParser:
+    """``footnav experiment``'s parser: one sub-command per experiment (imports every experiment)."""
+    parser = argparse.ArgumentParser(
+        prog="footnav experiment", description="Run a reproducible emulator experiment and print its table."
+    )
     names = parser.add_subparsers(dest="experiment", required=True, metavar="NAME")
     for name, module in experiment_modules().items():
         module.add_arguments(names.add_parser(name, help=module.HELP, description=module.HELP))
+    return parser
 
 
 def run_experiment(args: argparse.Namespace) -> int:

@@ -1,0 +1,155 @@
+"""The house: one ``footnav`` namespace, packages listed in pyproject.toml, layers that import one way,
+no import cycles, and a command line whose parser imports no numerics."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+from footnav.app import choices
+
+ROOT = Path(__file__).resolve().parents[1]
+TOPS = ("app", "device", "pipeline", "views")
+# what each layer may import of the others (architecture: app -> device, pipeline, views; views -> pipeline;
+# device -> pipeline; pipeline -> nothing above it)
+ALLOWED = {"app": set(TOPS), "views": {"views", "pipeline"}, "device": {"device", "pipeline"}, "pipeline": {"pipeline"}}
+
+
+def modules() -> dict[str, Path]:
+    found = {}
+    for top in TOPS:
+        for f in sorted((ROOT / top).rglob("*.py")):
+            parts = list(f.relative_to(ROOT).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            found["footnav." + ".".join(parts)] = f
+    return found
+
+
+def module_level_imports(path: Path) -> set[str]:
+    """Names imported when the module loads (not inside functions, not under ``TYPE_CHECKING``)."""
+    names: set[str] = set()
+
+    def visit(node: ast.AST) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+                continue
+            if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
+                continue
+            if isinstance(child, ast.Import):
+                names.update(a.name for a in child.names)
+            elif isinstance(child, ast.ImportFrom) and child.module and child.level == 0:
+                names.add(child.module)
+                names.update(f"{child.module}.{a.name}" for a in child.names)
+            visit(child)
+
+    visit(ast.parse(path.read_text(encoding="utf-8")))
+    return names
+
+
+def all_imports(path: Path) -> set[str]:
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.add(node.module)
+    return names
+
+
+def test_pyproject_lists_every_package_and_maps_the_namespace() -> None:
+    tool = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    folders = {
+        "footnav." + ".".join(init.parent.relative_to(ROOT).parts)
+        for top in TOPS
+        for init in (ROOT / top).rglob("__init__.py")
+    }
+    assert set(tool["packages"]) == folders
+    assert tool["package-dir"] == {f"footnav.{top}": top for top in TOPS}
+
+
+def test_the_old_top_level_names_are_not_importable() -> None:
+    for name in TOPS:
+        out = subprocess.run(
+            [sys.executable, "-c", f"import {name}"], cwd="/", capture_output=True, text=True, check=False
+        )
+        assert out.returncode != 0 and "ModuleNotFoundError" in out.stderr, name
+    out = subprocess.run([sys.executable, "-c", "import footnav.pipeline.navigation"], cwd="/", check=False)
+    assert out.returncode == 0
+
+
+def test_every_import_of_footnav_code_is_by_its_footnav_name() -> None:
+    offending = [
+        f"{path.relative_to(ROOT)}: {name}"
+        for path in [*modules().values(), *ROOT.glob("tests/*.py"), *ROOT.glob("benchmarks/*.py")]
+        for name in all_imports(path)
+        if name.split(".")[0] in TOPS
+    ]
+    assert offending == []
+
+
+def test_layers_import_one_way() -> None:
+    offending = []
+    for name, path in modules().items():
+        layer = name.split(".")[1]
+        for imported in all_imports(path):
+            if imported.startswith("footnav.") and imported.split(".")[1] not in ALLOWED[layer]:
+                offending.append(f"{name} imports {imported}")
+    assert offending == []
+
+
+def test_no_import_cycles_between_modules() -> None:
+    found = modules()
+    graph = {name: {m for m in module_level_imports(path) if m in found and m != name} for name, path in found.items()}
+    state: dict[str, int] = {}  # 1 on the current path, 2 done
+    cycles: list[list[str]] = []
+
+    def walk(node: str, path: list[str]) -> None:
+        state[node] = 1
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                cycles.append([*path[path.index(nxt) :], nxt])
+            elif nxt not in state:
+                walk(nxt, [*path, nxt])
+        state[node] = 2
+
+    for start in sorted(graph):
+        if start not in state:
+            walk(start, [start])
+    assert cycles == []
+
+
+def test_building_the_parser_imports_no_numerics_or_rerun() -> None:
+    code = (
+        "import sys; from footnav.app.cli import build_parser; build_parser(); "
+        "heavy = ('numpy', 'numba', 'scipy', 'rerun', 'serial', 'bleak', 'mcap'); "
+        "print(' '.join(m for m in heavy if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == ""
+
+
+@pytest.mark.parametrize(
+    ("names", "module", "table"),
+    [
+        (choices.IMU_GRADES, "footnav.device.emulator.sensors.imu_errors", "IMU_GRADES"),
+        (choices.AXIS_ERRORS, "footnav.device.emulator.sensors.imu_errors", "AXIS_ERRORS"),
+        (choices.PROFILES, "footnav.pipeline.navigation.profiles", "PROFILES"),
+        (choices.RECORDING_FORMATS, "footnav.device.files.recordings", "LOADERS"),
+    ],
+)
+def test_the_parsers_choices_are_the_tables_keys(names: tuple[str, ...], module: str, table: str) -> None:
+    import importlib
+
+    assert names == tuple(sorted(getattr(importlib.import_module(module), table)))
+
+
+def test_every_emulated_path_can_be_walked() -> None:
+    from footnav.device.emulator.motion.gait import simulate_walk
+
+    for path in choices.PATHS:
+        assert simulate_walk(path, 2.0, seed=1).t_s.size > 0
