@@ -1,7 +1,7 @@
 """BLE through bleak's public API, on the bumble backend, against the emulated unit as a GATT peripheral.
 
-No mocks: BleakScanner/BleakClient -> device/emulator/ble_backend.py -> bumble host + virtual
-controller -> LocalLink -> virtual controller + host -> GATT server of device/emulator/ble_peripheral.py.
+No mocks: BleakScanner/BleakClient -> device/emulator/serving/ble_backend.py -> bumble host + virtual
+controller -> LocalLink -> virtual controller + host -> GATT server of device/emulator/serving/ble_peripheral.py.
 The link budget and connection interval are emulated time; the emulator runs faster than real time.
 """
 

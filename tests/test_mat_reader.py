@@ -1,4 +1,4 @@
-"""The .mat reader's child process (pipeline/mat_reader.py): crashes are contained, scripts are safe."""
+"""The .mat reader's child process (device/files/mat_reader.py): crashes are contained, scripts are safe."""
 
 from __future__ import annotations
 
