@@ -23,10 +23,12 @@ import numpy as np
 from footnav.app.status import FootStatus, StatusLine
 from footnav.device.errors import DeviceError
 from footnav.device.links import reconnecting as links
+from footnav.device.links.base import CaptureTap
 from footnav.device.links.reconnecting import LinkEvent, ReconnectingLink
+from footnav.device.modes import Mode, RawImuMode
 from footnav.device.protocol.extensions import BaroBatch, TofBatch
 from footnav.device.protocol.raw_imu import RawImuBatch
-from footnav.device.unit import CaptureTap, LinkStats, Mode, OpenShoeUnit, RawImuMode
+from footnav.device.unit import LinkStats, OpenShoeUnit
 from footnav.pipeline.aiding.baro import PressureBatch
 from footnav.pipeline.aiding.tof import RangeBatch
 from footnav.pipeline.calibration.model import CalibrationError, ImuCalibration
@@ -142,8 +144,10 @@ async def open_unit_link(
 ) -> ReconnectingLink:
     """Open a reconnecting link to ``address`` (bytes the link writes itself go to ``capture`` too).
 
-    Raises:
-        DeviceError: the port does not exist or is busy, no Bluetooth stack, the BLE unit is not found.
+    Raises
+    ------
+    DeviceError
+        the port does not exist or is busy, no Bluetooth stack, the BLE unit is not found.
     """
     if address.transport == "ble":
         link = ReconnectingLink.ble(address.target, backend=ble_backend, on_event=on_event, tx_tap=capture)
@@ -388,9 +392,11 @@ async def run_device_session(
     ``extensions``: also switch on the unit's ToF and barometer states (footnav's extension states
     0xE1/0xE2); their readings go to the navigator.
 
-    Raises:
-        DeviceError: the port does not exist or is busy, no Bluetooth stack, the unit is not found or
-            does not answer the start command.
+    Raises
+    ------
+    DeviceError
+        the port does not exist or is busy, no Bluetooth stack, the unit is not found or
+        does not answer the start command.
     """
     link = await open_unit_link(address, on_event=on_link_event, capture=capture, ble_backend=ble_backend)
     unit = OpenShoeUnit(link, capture=capture, read_interval_s=LIVE_READ_INTERVAL_S)

@@ -21,6 +21,10 @@ counted and logged once per length, never fatal.
 
 Stop: processing off then outputs off of the detected set (``32``/``22``, or ``27``/``21``), as the
 vendor host apps do.
+
+The module is one class, about 700 lines: start, stream and stop share the driver's state (command
+set, mode, package counter, tick clock). The modes are in :mod:`footnav.device.modes`, the link
+interface in :mod:`footnav.device.links.base`.
 """
 
 from __future__ import annotations
@@ -29,13 +33,15 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import AsyncGenerator, Callable
+from collections.abc import AsyncGenerator
 from dataclasses import dataclass, field
 from types import TracebackType
-from typing import Final, Literal, Protocol, Self
+from typing import Final, Self
 
 import numpy as np
 from footnav.device.errors import DeviceError, ProtocolError
+from footnav.device.links.base import ByteLink, CaptureTap
+from footnav.device.modes import InsMode, Mode, NormalImuMode, RawImuMode, StepwiseMode
 from footnav.device.protocol import commands as p
 from footnav.device.protocol import extensions, ins_states, raw_imu, stepwise
 from footnav.device.protocol.extensions import BaroBatch, TofBatch
@@ -54,72 +60,8 @@ PROBE_TIMEOUT_S: Final = 1.0
 """How long the probe waits for the 2015 ACK before trying the 2014 set."""
 _MAX_REMEMBERED_ACKS: Final = 16
 
-CaptureTap = Callable[[Literal["rx", "tx"], int, bytes], None]
-"""``tap(direction, host_ns, data)``: sees every byte read or written, before any decoding."""
-
 Batch = ImuBatch | RawImuBatch | InsStateBatch | StepBatch | TofBatch | BaroBatch
 """What :meth:`OpenShoeUnit.batches` yields."""
-
-
-class ByteLink(Protocol):
-    """What a unit needs from a transport (serial, BLE, TCP, replay)."""
-
-    @property
-    def name(self) -> str:
-        """Port or address, for messages."""
-        ...
-
-    async def read(self) -> bytes:
-        """Next bytes (at least one), ``b""`` after close; raise ``DeviceError`` on disconnect."""
-        ...
-
-    async def write(self, data: bytes) -> None:
-        """Send bytes; raise ``DeviceError`` on failure."""
-        ...
-
-    async def close(self) -> None:
-        """Release the transport (idempotent)."""
-        ...
-
-
-# --- output modes --------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class NormalImuMode:
-    """Calibrated IMU (0x40, or 0x41 with on-board gyro-bias estimation), 34-byte packets."""
-
-    rate_divider_log2: int = 0
-    bias_estimation: bool = False
-    lossless: bool = False
-
-
-@dataclass(frozen=True, slots=True)
-class RawImuMode:
-    """Raw int16 registers of the IMUs in ``imu_mask`` (0x28); ``raw_imu.DUAL_IMU_MASK``: the dual board."""
-
-    imu_mask: int = 0x0F
-    rate_divider_log2: int = 0
-    lossless: bool = False
-    temperature: bool = False
-    magnetometer: bool = False
-
-
-@dataclass(frozen=True, slots=True)
-class InsMode:
-    """On-board ZUPT-aided INS states (0x33, then OUTPUT_STATE(S)); keep the unit still at the start."""
-
-    state_ids: tuple[int, ...] = ins_states.DEFAULT_INS_STATES
-    rate_divider_log2: int = 2
-    lossless: bool = False
-
-
-@dataclass(frozen=True, slots=True)
-class StepwiseMode:
-    """Stepwise dead reckoning (0x34; 0x14 on 2014 firmware): one lossless 64-byte packet per step."""
-
-
-Mode = NormalImuMode | RawImuMode | InsMode | StepwiseMode
 
 
 @dataclass(frozen=True, slots=True)
@@ -172,16 +114,21 @@ _COALESCE_BELOW_BYTES = 1024  # a read this small means the host has caught up w
 class OpenShoeUnit:
     """One unit: probe, start a mode, stream typed batches, stop.
 
-    Args:
-        link: an open byte link (e.g. :class:`footnav.device.links.serial.SerialLink`).
-        capture: optional tap called with every chunk read and written (for the capture file).
-        command_set: the firmware's command set if known (skips the probe).
-        read_interval_s: at most one read of the link per this interval. At 1 kHz a read holds about
-            one packet; coalescing reads (10 ms in live sessions: ten packets a read) cuts the
-            per-batch cost several-fold for at most that much added latency (README "Speed": two
-            feet at 1 kHz 41 % of a core at 5 ms, 22 % at 10 ms, latency p95 9 and 13 ms). Only
-            applies while caught up (reads under ``_COALESCE_BELOW_BYTES``); 0 reads as soon as
-            bytes arrive.
+    Parameters
+    ----------
+    link
+        an open byte link (e.g. :class:`footnav.device.links.serial.SerialLink`).
+    capture
+        optional tap called with every chunk read and written (for the capture file).
+    command_set
+        the firmware's command set if known (skips the probe).
+    read_interval_s
+        at most one read of the link per this interval. At 1 kHz a read holds about
+        one packet; coalescing reads (10 ms in live sessions: ten packets a read) cuts the
+        per-batch cost several-fold for at most that much added latency (README "Speed": two
+        feet at 1 kHz 41 % of a core at 5 ms, 22 % at 10 ms, latency p95 9 and 13 ms). Only
+        applies while caught up (reads under ``_COALESCE_BELOW_BYTES``); 0 reads as soon as
+        bytes arrive.
     """
 
     def __init__(
@@ -225,8 +172,10 @@ class OpenShoeUnit:
     ) -> OpenShoeUnit:
         """Open ``port`` exclusively and return a unit on it (close with :meth:`close` or ``async with``).
 
-        Raises:
-            DeviceError: see :meth:`footnav.device.links.serial.SerialLink.open`.
+        Raises
+        ------
+        DeviceError
+            see :meth:`footnav.device.links.serial.SerialLink.open`.
         """
         from footnav.device.links.serial import SerialLink
 
@@ -271,9 +220,12 @@ class OpenShoeUnit:
     ) -> None:
         """Probe the firmware if needed, then start ``mode`` and wait for the unit's ACK.
 
-        Raises:
-            DeviceError: no answer, the link failed, or the unit's firmware (2014) lacks ``mode``.
-            ValueError: an invalid mode parameter (rate divider, IMU mask, state IDs).
+        Raises
+        ------
+        DeviceError
+            no answer, the link failed, or the unit's firmware (2014) lacks ``mode``.
+        ValueError
+            an invalid mode parameter (rate divider, IMU mask, state IDs).
         """
         self._set_mode(mode)
         skip_first = False
@@ -327,16 +279,23 @@ class OpenShoeUnit:
     ) -> None:
         """Start the calibrated-IMU stream (0x40, or 0x41); lossy. See :meth:`start`.
 
-        Args:
-            rate_divider_log2: output every 2**k samples, k = 0..6: 1000, 500, ... 15.625 Hz at the
-                1 kHz base rate (default 0: every sample).
-            with_bias_estimation: use 0x41 (on-board gyro-bias estimation; output starts after 128
-                samples and is delayed by the front-end buffer).
-            timeout_s: how long to wait for ``A0 40 ..``.
+        Parameters
+        ----------
+        rate_divider_log2
+            output every 2**k samples, k = 0..6: 1000, 500, ... 15.625 Hz at the
+            1 kHz base rate (default 0: every sample).
+        with_bias_estimation
+            use 0x41 (on-board gyro-bias estimation; output starts after 128
+            samples and is delayed by the front-end buffer).
+        timeout_s
+            how long to wait for ``A0 40 ..``.
 
-        Raises:
-            DeviceError: no ACK within ``timeout_s``, or the link failed.
-            ValueError: ``rate_divider_log2`` outside 0..6.
+        Raises
+        ------
+        DeviceError
+            no ACK within ``timeout_s``, or the link failed.
+        ValueError
+            ``rate_divider_log2`` outside 0..6.
         """
         p.imu_mode_byte(rate_divider_log2)  # validate before anything is sent
         mode = NormalImuMode(rate_divider_log2, bias_estimation=with_bias_estimation)
@@ -347,8 +306,10 @@ class OpenShoeUnit:
     ) -> None:
         """Switch footnav's extension states (ToF 0xE1, barometer 0xE2) on or off (2015 firmware only).
 
-        Raises:
-            DeviceError: firmware not probed yet (call :meth:`start` first) or 2014 firmware, or no ACK.
+        Raises
+        ------
+        DeviceError
+            firmware not probed yet (call :meth:`start` first) or 2014 firmware, or no ACK.
         """
         commands = self._commands
         if not isinstance(commands, p.Commands2015):
@@ -366,8 +327,10 @@ class OpenShoeUnit:
     async def request_mcu_id(self, *, timeout_s: float = START_TIMEOUT_S) -> bytes:
         """Ask for the MCU serial number (command 0x04) and return its 15 bytes.
 
-        Raises:
-            DeviceError: no reply within ``timeout_s`` or no firmware probed yet.
+        Raises
+        ------
+        DeviceError
+            no reply within ``timeout_s`` or no firmware probed yet.
         """
         if self._commands is None:
             await self._probe(p.Commands2015().processing_off(), min(PROBE_TIMEOUT_S, timeout_s))
@@ -400,11 +363,15 @@ class OpenShoeUnit:
         If no :meth:`batches` loop is running, also wait up to ``timeout_s`` for the ACK of outputs off
         (data still arriving meanwhile is ACKed if lossless, and discarded).
 
-        Returns:
+        Returns
+        -------
+        bool
             True if the ACK of outputs off was seen (always False while a batch loop is running).
 
-        Raises:
-            DeviceError: the link failed while writing.
+        Raises
+        ------
+        DeviceError
+            the link failed while writing.
         """
         commands = self._commands
         if commands is None:
@@ -442,8 +409,10 @@ class OpenShoeUnit:
 
         Ends when the link is closed; wrap in ``contextlib.aclosing`` if you may break out early.
 
-        Raises:
-            DeviceError: the unit was disconnected.
+        Raises
+        ------
+        DeviceError
+            the unit was disconnected.
         """
         self._iterating = True
         try:
@@ -551,8 +520,10 @@ class OpenShoeUnit:
     async def _send(self, cmd: p.OutgoingCommand) -> None:
         """Write a command of the detected set.
 
-        Raises:
-            ProtocolError: ``cmd`` belongs to the other command set (it would be misparsed).
+        Raises
+        ------
+        ProtocolError
+            ``cmd`` belongs to the other command set (it would be misparsed).
         """
         if cmd.command_set is not self.command_set:
             raise ProtocolError(

@@ -304,8 +304,8 @@ async def test_stepwise_dead_reckoning_over_ble_acks_resends_and_dedup_give_the_
     once, the track equal to the emulator's step sums."""
     from footnav.device.emulator.motion.gait import simulate_walk
     from footnav.device.emulator.scripts import steps_from_truth, yaw_from_quat_wxyz
+    from footnav.device.modes import StepwiseMode
     from footnav.device.protocol.stepwise import StepBatch
-    from footnav.device.unit import StepwiseMode
 
     walk = simulate_walk("rectangle", 25.0, seed=1)
     steps = steps_from_truth(walk.t_s, walk.pos_n_m, yaw_from_quat_wxyz(walk.quat_nb_wxyz), walk.stance)

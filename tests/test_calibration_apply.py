@@ -19,8 +19,7 @@ from footnav.app.experiments.calibration import calibrate_emulated
 from footnav.device.emulator.sensors.icosahedron import MISCALIBRATED_MCU_ID, Miscalibration
 from footnav.device.files.capture import iter_capture, summarize_capture
 from footnav.device.protocol import commands as protocol
-from footnav.pipeline.nav_types import NavBatch
-from footnav.views.convert import concat_batches
+from footnav.pipeline.nav_types import NavBatch, concat_batches
 
 DURATION_S = 20.0
 

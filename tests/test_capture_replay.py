@@ -28,8 +28,7 @@ from footnav.device.files.capture import (
     summarize_capture,
 )
 from footnav.pipeline.errors import InputFormatError
-from footnav.pipeline.nav_types import NavBatch
-from footnav.views.convert import concat_batches
+from footnav.pipeline.nav_types import NavBatch, concat_batches
 from mcap.writer import Writer
 
 FIELDS = ("t_s", "pos_n_m", "vel_n_mps", "quat_nb_wxyz", "pos_cov_n_m2", "stance", "detector_stat",

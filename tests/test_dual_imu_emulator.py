@@ -18,9 +18,10 @@ from footnav.device.emulator.sensors.dual_imu import (
 )
 from footnav.device.emulator.sensors.imu_errors import IMU_GRADES
 from footnav.device.emulator.serving.pty import PtyShoeServer
+from footnav.device.modes import RawImuMode
 from footnav.device.protocol import raw_imu
 from footnav.device.protocol.raw_imu import RawImuBatch
-from footnav.device.unit import OpenShoeUnit, RawImuMode
+from footnav.device.unit import OpenShoeUnit
 from footnav.pipeline.dual_imu.board_eskf import run_dual_eskf
 from footnav.pipeline.dual_imu.model import quat_to_mats
 from footnav.pipeline.stance.detectors import DetectorParams, StreamingDetector

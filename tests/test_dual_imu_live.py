@@ -154,8 +154,7 @@ def test_dual_imu_capture_replays_exactly_as_live(tmp_path: Path) -> None:
     from footnav.app.commands.demo import DemoOptions, run_demo
     from footnav.app.commands.replay import ReplayOptions, run_replay
     from footnav.app.config import defaults
-    from footnav.pipeline.nav_types import NavBatch
-    from footnav.views.convert import concat_batches
+    from footnav.pipeline.nav_types import NavBatch, concat_batches
 
     live: list[NavBatch] = []
     replayed: list[NavBatch] = []

@@ -24,6 +24,7 @@ from footnav.device.emulator.sensors.tof import tof_readings
 from footnav.device.emulator.serving.pty import BT_UART_BUDGET_BPS, PtyShoeServer
 from footnav.device.errors import DeviceError, ProtocolError
 from footnav.device.links.serial import SerialLink
+from footnav.device.modes import InsMode, NormalImuMode, RawImuMode, StepwiseMode
 from footnav.device.protocol import commands as protocol
 from footnav.device.protocol import extensions, raw_imu
 from footnav.device.protocol.extensions import BaroBatch, TofBatch
@@ -31,7 +32,7 @@ from footnav.device.protocol.framer import DataPacket, DeviceAck, Framer
 from footnav.device.protocol.ins_states import InsStateBatch
 from footnav.device.protocol.raw_imu import RawImuBatch
 from footnav.device.protocol.stepwise import StepBatch
-from footnav.device.unit import Batch, InsMode, NormalImuMode, OpenShoeUnit, RawImuMode, StepwiseMode
+from footnav.device.unit import Batch, OpenShoeUnit
 from footnav.pipeline.samples import ImuBatch
 
 

@@ -16,7 +16,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pytest
 from footnav.device.files.capture import read_capture_info
-from footnav.views.convert import step_onsets
+from footnav.pipeline.gait.events import step_onsets
 from footnav.views.outputs import open_session_views
 from footnav.views.sinks import LOOPBACK, viewer_binary
 from rerun.chunk import RrdReader

@@ -16,8 +16,7 @@ from footnav.app.config import defaults, load_config
 from footnav.pipeline.aiding.tof import TofConfig
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.gait.tof_clearance import swing_clearance
-from footnav.pipeline.nav_types import NavBatch
-from footnav.views.convert import concat_batches
+from footnav.pipeline.nav_types import NavBatch, concat_batches
 
 
 def _collector() -> tuple[dict[str, list[NavBatch]], Callable[[str], Callable[[NavBatch], None]]]:

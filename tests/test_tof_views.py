@@ -8,16 +8,16 @@ from pathlib import Path
 import numpy as np
 import pyarrow.compute as pc
 import rerun as rr
-from footnav.app.commands.live import FOOT_START_OFFSET_M, offset_sink
 from footnav.app.experiments import tof as exp
+from footnav.app.feet import FOOT_START_OFFSET_M, offset_sink
 from footnav.device.emulator.scripts import baro_from_height
 from footnav.pipeline.aiding.baro import PressureBatch
 from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.gait.events import GaitEventTracker
 from footnav.pipeline.gait.tof_clearance import swing_clearance
-from footnav.pipeline.nav_types import NavBatch
+from footnav.pipeline.nav_types import NavBatch, concat_batches
 from footnav.pipeline.navigation.navigator import NavConfig, Navigator
 from footnav.pipeline.samples import ImuBatch
-from footnav.views import convert
 from footnav.views.logger import RerunLogger
 from footnav.views.paths import TIMELINE, FootPaths
 from rerun.chunk import RrdReader
@@ -41,6 +41,7 @@ def test_tof_entities_round_trip_through_an_rrd(tmp_path: Path) -> None:
     nav.add_pressure(PressureBatch(baro.t_s, baro.pressure_pa))
     path = tmp_path / "tof.rrd"
     logger = RerunLogger([rr.FileSink(str(path))], recording_id="tof-views")
+    events = GaitEventTracker(TofConfig().snap_m)
     outs = []
     for a in range(0, len(t), 50):
         idx = np.arange(a, min(a + 50, len(t)))
@@ -49,9 +50,12 @@ def test_tof_entities_round_trip_through_an_rrd(tmp_path: Path) -> None:
         )
         if out is not None:
             outs.append(out)
-            assert logger.put(out)
+            assert logger.put(events.annotate(out))
+    rest = events.finish()
+    assert rest is not None
+    logger.log_swing_clearance(rest)
     assert logger.close() and logger.stats.error is None
-    whole = convert.concat_batches(outs)
+    whole = concat_batches(outs)
     r, strides, alt = whole.ranges, whole.strides, whole.altitude
     assert r is not None and strides is not None and alt is not None and whole.floor_z_m is not None
     store = RrdReader(path).stream().collect()
@@ -92,7 +96,7 @@ def test_tof_entities_round_trip_through_an_rrd(tmp_path: Path) -> None:
 
 
 def test_two_feet_display_offset_moves_the_floor_hits_with_the_track() -> None:
-    """footnav.app.commands.live.offset_sink (two feet drawn side by side): the readings' floor hits are shifted
+    """footnav.app.feet.offset_sink (two feet drawn side by side): the readings' floor hits are shifted
     with the
     positions, so the views' floor lookups along the way see both in one frame."""
     rec = exp.record("rectangle", 8.0, seed=1)

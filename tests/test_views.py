@@ -13,6 +13,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pytest
 import rerun as rr
+from footnav.pipeline.gait.events import step_onsets
 from footnav.pipeline.nav_types import NavBatch
 from footnav.views import convert
 from footnav.views.blueprint import build_blueprint
@@ -366,8 +367,8 @@ def test_viewer_that_cannot_open_a_window_falls_back_to_a_file(tmp_path: Path) -
 
 def test_step_onsets_floor_ellipses_and_heading() -> None:
     stance = np.array([True, True, False, False, True, True, False, True])
-    np.testing.assert_array_equal(convert.step_onsets(stance, None), [4, 7])  # standing at the start is no step
-    np.testing.assert_array_equal(convert.step_onsets(stance, False), [0, 4, 7])
+    np.testing.assert_array_equal(step_onsets(stance, None), [4, 7])  # standing at the start is no step
+    np.testing.assert_array_equal(step_onsets(stance, False), [0, 4, 7])
     a = np.deg2rad(30.0)
     rot = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
     cov = rot @ np.diag([0.09, 0.04, 0.01]) @ rot.T

@@ -8,15 +8,12 @@ one ``imu_time`` index. Quaternions are scalar-first (``wxyz``) everywhere in fo
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TypeVar
 
 import numpy as np
 import rerun as rr
 from footnav.pipeline.aiding.tof_measurement import USED as TOF_USED
-from footnav.pipeline.nav_types import NavBatch, SmoothedSpan, concat_if_all
+from footnav.pipeline.nav_types import NavBatch, SmoothedSpan
 from footnav.views.paths import TIMELINE, FootPaths
 from numpy.typing import NDArray
 
@@ -76,11 +73,16 @@ def rotmat_to_quat_xyzw(mat: F64) -> F64:
 def cov_ellipsoids(cov: F64, *, sigma_scale: float = DEFAULT_SIGMA_SCALE) -> tuple[F64, F64]:
     """Ellipsoid half-sizes and orientations of 3×3 covariances.
 
-    Args:
-        cov: (n, 3, 3) covariance matrices (symmetrised here; non-finite ones become zero-size).
-        sigma_scale: half-sizes are ``sigma_scale * sqrt(eigenvalue)``.
+    Parameters
+    ----------
+    cov
+        (n, 3, 3) covariance matrices (symmetrised here; non-finite ones become zero-size).
+    sigma_scale
+        half-sizes are ``sigma_scale * sqrt(eigenvalue)``.
 
-    Returns:
+    Returns
+    -------
+    tuple[F64, F64]
         half_sizes (n, 3) along the ellipsoid's own axes, and quat_xyzw (n, 4) rotating those axes
         into the covariance's frame, so that ``R diag(h²) Rᵀ = sigma_scale² · cov``.
     """
@@ -104,71 +106,36 @@ def pos_sigmas(cov: F64) -> F64:
     return np.concatenate([np.sqrt(diag), np.sqrt(diag.sum(axis=-1, keepdims=True))], axis=-1)
 
 
-def concat_batches(batches: Sequence[NavBatch]) -> NavBatch:
-    """Join consecutive batches into one (a scalar detector threshold: the last batch's is kept)."""
-    if len(batches) == 1:
-        return batches[0]
-    if not batches:
-        raise ValueError("concat_batches needs at least one NavBatch")
-    return NavBatch(
-        floor_z_m=_concat_optional([b.floor_z_m for b in batches], [len(b) for b in batches]),
-        ranges=_concat_dataclasses([b.ranges for b in batches]),
-        strides=_concat_dataclasses([b.strides for b in batches]),
-        altitude=_concat_dataclasses([b.altitude for b in batches]),
-        t_s=np.concatenate([b.t_s for b in batches]),
-        pos_n_m=np.concatenate([b.pos_n_m for b in batches]),
-        vel_n_mps=np.concatenate([b.vel_n_mps for b in batches]),
-        quat_nb_wxyz=np.concatenate([b.quat_nb_wxyz for b in batches]),
-        pos_cov_n_m2=np.concatenate([b.pos_cov_n_m2 for b in batches]),
-        stance=np.concatenate([b.stance for b in batches]),
-        detector_stat=np.concatenate([b.detector_stat for b in batches]),
-        detector_threshold=np.concatenate([np.broadcast_to(b.detector_threshold, (len(b),)) for b in batches]),
-        clearance_m=np.concatenate([b.clearance_m for b in batches]),
-        host_ns=np.concatenate([b.host_ns for b in batches]),
-        cov_pos_yaw=concat_if_all([b.cov_pos_yaw for b in batches]),
-        smoothed=SmoothedSpan.concat([b.smoothed for b in batches if b.smoothed is not None]),
-    )
-
-
-def _concat_optional(parts: Sequence[F64 | None], lengths: Sequence[int]) -> F64 | None:
-    """Per-sample optional arrays joined; NaN where a batch had none (None if none had any)."""
-    if all(p is None for p in parts):
-        return None
-    return np.concatenate([np.full(n, np.nan) if p is None else p for p, n in zip(parts, lengths, strict=True)])
-
-
-_T = TypeVar("_T")
-
-
-def _concat_dataclasses(parts: Sequence[_T | None]) -> _T | None:
-    """Dataclasses of per-event arrays (ToF readings, strides, altitude) joined field by field."""
-    present = [p for p in parts if p is not None]
-    if not present:
-        return None
-    if len(present) == 1:
-        return present[0]
-    cls = type(present[0])
-    names = [f.name for f in dataclasses.fields(cls)]  # type: ignore[arg-type]
-    return cls(**{k: np.concatenate([getattr(p, k) for p in present]) for k in names})
-
-
 @dataclass(frozen=True, slots=True)
 class NavArrays:
     """Column arrays for one batch of n samples, in the dtypes and orders Rerun takes.
 
-    Attributes:
-        t_s: (n,) device time, s.
-        pos: (n, 3) float32 IMU position, m (track points, pose translation, ellipsoid centres).
-        class_ids: (n,) uint16, 1 = stance, 0 = swing.
-        quat_xyzw: (n, 4) float32 attitude body to navigation.
-        pos_cov: (n, 3, 3) position covariance, m² (ellipsoids: :meth:`ellipsoids`, for the rows shown).
-        sigma_scale: k of the k-sigma ellipsoids.
-        stance: (n,) float64 0.0 / 1.0.
-        clearance: (n,) float64, m.
-        pos_sigma: (n, 4) float64 ``[σx, σy, σz, sqrt(trace)]``, m.
-        detector: (n, 2) float64 ``[statistic, threshold]``.
-        speed: (n,) float64 horizontal speed, m/s.
-        heading: (n,) float64 heading, degrees in (−180, 180].
+    Attributes
+    ----------
+    t_s
+        (n,) device time, s.
+    pos
+        (n, 3) float32 IMU position, m (track points, pose translation, ellipsoid centres).
+    class_ids
+        (n,) uint16, 1 = stance, 0 = swing.
+    quat_xyzw
+        (n, 4) float32 attitude body to navigation.
+    pos_cov
+        (n, 3, 3) position covariance, m² (ellipsoids: :meth:`ellipsoids`, for the rows shown).
+    sigma_scale
+        k of the k-sigma ellipsoids.
+    stance
+        (n,) float64 0.0 / 1.0.
+    clearance
+        (n,) float64, m.
+    pos_sigma
+        (n, 4) float64 ``[σx, σy, σz, sqrt(trace)]``, m.
+    detector
+        (n, 2) float64 ``[statistic, threshold]``.
+    speed
+        (n,) float64 horizontal speed, m/s.
+    heading
+        (n,) float64 heading, degrees in (−180, 180].
     """
 
     t_s: F64
@@ -225,18 +192,6 @@ def heading_deg(quat_nb_wxyz: F64) -> F64:
     return np.degrees(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
 
 
-def step_onsets(stance: NDArray[np.bool_], previous: bool | None) -> NDArray[np.intp]:
-    """Indices (k,) where a step lands: stance after swing (``previous``: the flag before sample 0;
-    ``None`` at the start of a session, where standing still is the start, not a step)."""
-    s = np.asarray(stance, dtype=bool)
-    if s.size == 0:
-        return np.zeros(0, dtype=np.intp)
-    before = np.empty(s.shape, dtype=bool)
-    before[0] = True if previous is None else previous
-    before[1:] = s[:-1]
-    return np.flatnonzero(s & ~before)
-
-
 STEP_ELLIPSE_HALF_THICKNESS_M = 0.0005
 """Step ellipses are flat discs this thick (half), drawn on the floor under the step marker."""
 
@@ -244,7 +199,9 @@ STEP_ELLIPSE_HALF_THICKNESS_M = 0.0005
 def floor_ellipses(cov: F64, *, sigma_scale: float = DEFAULT_SIGMA_SCALE) -> tuple[F64, F64]:
     """Flat ellipses of the horizontal 2×2 block of (n, 3, 3) position covariances.
 
-    Returns:
+    Returns
+    -------
+    tuple[F64, F64]
         half_sizes (n, 3): ``sigma_scale·sqrt(eigenvalue)`` along the ellipse axes and a thin z,
         and quat_xyzw (n, 4): the rotation about z taking the x axis to the major axis.
     """

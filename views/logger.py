@@ -25,9 +25,7 @@ from types import TracebackType
 
 import numpy as np
 import rerun as rr
-from footnav.pipeline.aiding.tof import TofConfig
-from footnav.pipeline.gait.tof_clearance import SwingClearanceTracker
-from footnav.pipeline.nav_types import NavBatch
+from footnav.pipeline.nav_types import ClearanceSeries, NavBatch, concat_batches
 from footnav.views import convert
 from footnav.views.blueprint import build_blueprint, floor_patch, static_setup
 from footnav.views.dual_imu import DualRunView, dual_columns, static_styles
@@ -86,6 +84,12 @@ class _Truth:
 
 
 @dataclass(frozen=True, slots=True)
+class _SwingRest:
+    foot: str
+    series: ClearanceSeries
+
+
+@dataclass(frozen=True, slots=True)
 class _Dual:
     run: str
     view: DualRunView
@@ -138,15 +142,24 @@ _STOP = object()
 class LoggerStats:
     """Counters of one :class:`RerunLogger` (read them any time; exact after :meth:`RerunLogger.close`).
 
-    Attributes:
-        samples_in: samples accepted by ``put``.
-        samples_logged: samples handed to ``send_columns``.
-        samples_dropped: samples refused by ``put`` because the queue was full (or after close).
-        batches_dropped: NavBatches refused.
-        sends: ``send_columns`` rounds (one per ~100 ms flush).
-        send_seconds: time spent converting and in ``send_columns``, s.
-        max_queued_samples: high-water mark of the queue, samples.
-        error: first exception raised on the logger thread (the thread keeps draining after it).
+    Attributes
+    ----------
+    samples_in
+        samples accepted by ``put``.
+    samples_logged
+        samples handed to ``send_columns``.
+    samples_dropped
+        samples refused by ``put`` because the queue was full (or after close).
+    batches_dropped
+        NavBatches refused.
+    sends
+        ``send_columns`` rounds (one per ~100 ms flush).
+    send_seconds
+        time spent converting and in ``send_columns``, s.
+    max_queued_samples
+        high-water mark of the queue, samples.
+    error
+        first exception raised on the logger thread (the thread keeps draining after it).
     """
 
     samples_in: int = 0
@@ -162,19 +175,31 @@ class LoggerStats:
 class RerunLogger:
     """Logs NavBatches to Rerun sinks from one background thread.
 
-    Args:
-        sinks: where the recording goes (see :func:`footnav.views.sinks.choose_sinks`); at least one.
-        recording_id: one id per walking session; files and viewers merge streams with equal ids.
-        feet: foot names that will be logged (sets up blueprint and static styling).
-        sigma_scale: covariance ellipsoids are drawn at this many σ.
-        ellipsoid_every: log the ellipsoid every n-th sample (1 = every sample, 0 = never).
-        series_every: log speed and heading every n-th sample.
-        max_queued_samples: queue budget; beyond it ``put`` drops (see module docstring).
-        flush_period_s: batching period of the thread.
-        dual_runs: dual-IMU boards that :meth:`log_dual` will be given (blueprint: trails and a plot).
+    Parameters
+    ----------
+    sinks
+        where the recording goes (see :func:`footnav.views.sinks.choose_sinks`); at least one.
+    recording_id
+        one id per walking session; files and viewers merge streams with equal ids.
+    feet
+        foot names that will be logged (sets up blueprint and static styling).
+    sigma_scale
+        covariance ellipsoids are drawn at this many σ.
+    ellipsoid_every
+        log the ellipsoid every n-th sample (1 = every sample, 0 = never).
+    series_every
+        log speed and heading every n-th sample.
+    max_queued_samples
+        queue budget; beyond it ``put`` drops (see module docstring).
+    flush_period_s
+        batching period of the thread.
+    dual_runs
+        dual-IMU boards that :meth:`log_dual` will be given (blueprint: trails and a plot).
 
-    Raises:
-        ValueError: no sinks given.
+    Raises
+    ------
+    ValueError
+        no sinks given.
     """
 
     def __init__(
@@ -221,8 +246,6 @@ class RerunLogger:
         self._steps: dict[str, int] = dict.fromkeys(self.feet, 0)
         self._tof_totals: dict[str, np.ndarray] = {}
         """Per foot: ToF readings since the start [used, gated, invalid status] (``convert.tof_columns``)."""
-        self._swing: dict[str, SwingClearanceTracker] = {}
-        """Per ToF foot: the clearance from each swing's hits past and future, once the swing is over."""
         self._thread = threading.Thread(target=self._run, name="footnav-rerun", daemon=True)
         self._thread.start()
 
@@ -276,6 +299,14 @@ class RerunLogger:
             raise ValueError(f"foot {foot!r} was not declared; this logger has feet={self.feet}")
         if not self._closed:
             self._queue.put(_Truth(foot, np.asarray(t_s, np.float64), np.asarray(pos_n_m, np.float64)))
+
+    def log_swing_clearance(self, series: ClearanceSeries, *, foot: str = DEFAULT_FOOT) -> None:
+        """Log whole-swing clearance values that came after the foot's last batch (the session's end:
+        ``GaitEventTracker.finish``). Never blocks."""
+        if foot not in self._paths:
+            raise ValueError(f"foot {foot!r} was not declared; this logger has feet={self.feet}")
+        if not self._closed:
+            self._queue.put(_SwingRest(foot, series))
 
     def log_link(
         self, *, foot: str = DEFAULT_FOOT, t_s: float, rate_hz: float, lost_packets: int, reconnects: int = 0
@@ -362,6 +393,11 @@ class RerunLogger:
                 n_pending, deadline = 0, None
                 self._guarded(self._send_truth, item)
                 continue
+            elif isinstance(item, _SwingRest):
+                self._flush(pending, events)  # after the foot's earlier batches
+                n_pending, deadline = 0, None
+                self._guarded(self._send_swing_rest, item)
+                continue
             stop = item is _STOP
             if deadline is None and item is not None and not stop:
                 deadline = time.monotonic() + self._flush_period_s
@@ -373,7 +409,6 @@ class RerunLogger:
             if stop:
                 break
         self._guarded(self._send_lines, True)
-        self._guarded(self._send_swing_rest)
         self._guarded(self._finish)
 
     def _discard_until_stop(self) -> None:
@@ -392,7 +427,7 @@ class RerunLogger:
                 continue
             n = sum(len(b) for b in batches)
             try:
-                self._send_nav(foot, convert.concat_batches(batches))
+                self._send_nav(foot, concat_batches(batches))
             except Exception as exc:
                 self._record_error(exc)
             batches.clear()
@@ -437,17 +472,13 @@ class RerunLogger:
         columns_list = convert.nav_columns(
             arrays, paths, ellipsoid_every=self._ellipsoid_every, first_index=first, series_every=self._series_every
         )
-        onsets = convert.step_onsets(nav.stance, self._last_stance[foot])
+        onsets = nav.step_onsets if nav.step_onsets is not None else np.zeros(0, dtype=np.intp)
         columns_list += convert.step_columns(arrays, nav.pos_cov_n_m2, onsets, paths, sigma_scale=self._sigma_scale)
         columns_list += convert.tof_columns(nav, paths, self._tof_totals.setdefault(foot, np.zeros(3, np.int64)))
         if nav.smoothed is not None:
             columns_list += convert.smoothed_columns(nav.smoothed, paths, every=SMOOTHED_EVERY)
-        tracker = self._swing.get(foot)
-        if tracker is None and nav.floor_z_m is not None:  # a ToF unit: its floor is tracked from now on
-            tracker = self._swing[foot] = SwingClearanceTracker(TofConfig().snap_m)
-        if tracker is not None:
-            done = tracker.update(nav.t_s, nav.pos_n_m, nav.stance, nav.clearance_m, nav.ranges)
-            columns_list += convert.series_columns(paths.swing_clearance, *done)
+        if nav.swing_clearance is not None:
+            columns_list += convert.series_columns(paths.swing_clearance, *nav.swing_clearance)
         for path, index, columns in columns_list:
             rec.send_columns(path, indexes=[index], columns=columns)
         self._steps[foot] += int(onsets.size)
@@ -514,10 +545,9 @@ class RerunLogger:
             columns=rr.Points3D.columns(positions=truth.pos_n_m.astype(np.float32)),
         )
 
-    def _send_swing_rest(self) -> None:
-        for foot, tracker in self._swing.items():
-            for path, index, columns in convert.series_columns(self._paths[foot].swing_clearance, *tracker.finish()):
-                self.recording.send_columns(path, indexes=[index], columns=columns)
+    def _send_swing_rest(self, item: _SwingRest) -> None:
+        for path, index, columns in convert.series_columns(self._paths[item.foot].swing_clearance, *item.series):
+            self.recording.send_columns(path, indexes=[index], columns=columns)
 
     def _finish(self) -> None:
         self.recording.flush(timeout_sec=CLOSE_TIMEOUT_S)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import rerun as rr
-from footnav.pipeline.nav_types import NavBatch
+from footnav.pipeline.nav_types import ClearanceSeries, NavBatch
 from footnav.views.dual_imu import DualRunView
 from footnav.views.logger import FILE_FLUSH_PERIOD_S, FLUSH_PERIOD_S, RerunLogger
 from footnav.views.paths import DEFAULT_FOOT
@@ -132,6 +132,11 @@ class SessionViews:
     def log_truth(self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT) -> None:
         for out in self.live:
             out.logger.log_truth(pos_n_m, t_s=t_s, foot=foot)
+
+    def log_swing_clearance(self, series: ClearanceSeries, *, foot: str = DEFAULT_FOOT) -> None:
+        """Whole-swing clearance values that came after the foot's last batch, on every live output."""
+        for out in self.live:
+            out.logger.log_swing_clearance(series, foot=foot)
 
     def log_dual(self, view: DualRunView, *, run: str) -> None:
         """A dual-IMU board's tracks and constraint residuals, on every live output."""

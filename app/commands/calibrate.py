@@ -25,13 +25,15 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING, Final
 
 from footnav.app.calibration_store import calibration_dir, save_calibration
-from footnav.app.commands.live import new_session_id, open_capture
 from footnav.app.config import Config
+from footnav.app.feet import new_session_id, open_capture
 from footnav.app.session import UnitAddress, open_unit_link
 from footnav.device.emulator.sensors.icosahedron import MISCALIBRATED_MCU_ID as DEMO_MCU_ID
 from footnav.device.files.capture import CaptureReplayLink, CaptureWriter, UnitHeader, read_capture_info
+from footnav.device.links.base import ByteLink
+from footnav.device.modes import RawImuMode
 from footnav.device.protocol import raw_imu
-from footnav.device.unit import Batch, ByteLink, OpenShoeUnit, RawImuMode
+from footnav.device.unit import Batch, OpenShoeUnit
 from footnav.pipeline.calibration.model import (
     PARAM_NAMES,
     STANDARD_GRAVITY_MPS2,
@@ -61,19 +63,29 @@ LOW_RATE_HOLD_S: Final = 8.0
 class CalibrateOptions:
     """What ``footnav calibrate`` was asked for (exactly one of ``address``, ``capture_file``, ``demo``).
 
-    Attributes:
-        imu_mask: IMUs whose raw outputs are averaged (0x0F: a MIMU board's four).
-        rate_divider_log2: raw output every 2**k samples of the 1 kHz base rate (None: 0 on serial,
-            :data:`BLE_RATE_DIVIDER` over BLE).
-        hold_s: still time averaged per face (None: 2 s at 1 kHz, 8 s below 500 Hz: the divided raw
-            output is decimated, not averaged, so fewer samples need a longer hold for the same accuracy).
-        allow_no_temperature: fit the 9-parameter model when the temperature is unobservable.
-        capture: write a capture of the procedure into ``sessions.sessions_dir``.
-        demo_pace: emulator speed (``math.inf``: as fast as read).
-        out: where the procedure is narrated (tests pass a buffer).
-        ble_backend: tests only: the bleak backend.
-        source_done: tests only: True once an emulated unit has sent everything (the procedure then
-            ends with the faces it has, as at the end of a capture).
+    Attributes
+    ----------
+    imu_mask
+        IMUs whose raw outputs are averaged (0x0F: a MIMU board's four).
+    rate_divider_log2
+        raw output every 2**k samples of the 1 kHz base rate (None: 0 on serial,
+        :data:`BLE_RATE_DIVIDER` over BLE).
+    hold_s
+        still time averaged per face (None: 2 s at 1 kHz, 8 s below 500 Hz: the divided raw
+        output is decimated, not averaged, so fewer samples need a longer hold for the same accuracy).
+    allow_no_temperature
+        fit the 9-parameter model when the temperature is unobservable.
+    capture
+        write a capture of the procedure into ``sessions.sessions_dir``.
+    demo_pace
+        emulator speed (``math.inf``: as fast as read).
+    out
+        where the procedure is narrated (tests pass a buffer).
+    ble_backend
+        tests only: the bleak backend.
+    source_done
+        tests only: True once an emulated unit has sent everything (the procedure then
+        ends with the faces it has, as at the end of a capture).
     """
 
     config: Config
@@ -236,9 +248,12 @@ async def _procedure(
 async def calibrate_session(opts: CalibrateOptions) -> CalibrateResult:
     """Run the procedure from the chosen source and save the calibration; see the module docstring.
 
-    Raises:
-        CalibrationError: the faces do not determine the calibration (the message says what to redo).
-        DeviceError, InputFormatError: the unit or the capture cannot be used.
+    Raises
+    ------
+    CalibrationError
+        the faces do not determine the calibration (the message says what to redo).
+    DeviceError, InputFormatError
+        the unit or the capture cannot be used.
     """
     result = CalibrateResult()
     truth: Miscalibration | None = None

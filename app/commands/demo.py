@@ -25,14 +25,15 @@ from pathlib import Path
 import numpy as np
 from footnav.app import heap
 from footnav.app.choices import PATHS
-from footnav.app.commands.live import (
+from footnav.app.config import DEFAULT, Config, defaults
+from footnav.app.feet import (
     FOOT_START_OFFSET_M,
     FootRun,
     attach_unit,
     calibration_lookup,
-    dual_nav_config,
     dual_view_sink,
     finish_capture,
+    foot_run,
     foot_sinks,
     link_reporter,
     new_session_id,
@@ -41,7 +42,6 @@ from footnav.app.commands.live import (
     run_feet,
     unit_header,
 )
-from footnav.app.config import DEFAULT, Config, defaults
 from footnav.app.session import SerialSessionResult, UnitAddress, run_device_session
 from footnav.app.status import StatusLine, input_handling
 from footnav.device.emulator.motion.floors import floor_of
@@ -52,15 +52,14 @@ from footnav.device.emulator.sensors.icosahedron import MISCALIBRATED_MCU_ID, mi
 from footnav.device.emulator.sensors.imu_errors import IMU_GRADES, corrupt
 from footnav.device.emulator.sensors.tof import TofMount, TofSensorModel, tof_readings
 from footnav.device.emulator.serving.pty import PtyShoeServer
+from footnav.device.modes import RawImuMode
 from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
-from footnav.device.unit import RawImuMode
 from footnav.pipeline.aiding.tof import TofConfig
 from footnav.pipeline.dual_imu.lever_arm import check_lever_arm
 from footnav.pipeline.dual_imu.navigator import DualNavigator
 from footnav.pipeline.navigation.navigator import Navigator
 from footnav.pipeline.navigation.profiles import get_profile
 from footnav.pipeline.runner import NavSink
-from footnav.pipeline.smoothing.stepwise import make_navigator
 from footnav.views.outputs import open_session_views
 from numpy.typing import NDArray
 
@@ -272,15 +271,9 @@ def run_demo(opts: DemoOptions) -> int:
     status = StatusLine(feet=feet)
     nav_config = cfg.nav_config()
     lever = opts.lever_b_m or DEFAULT_LEVER_B_M
-    dual_config = dual_nav_config(nav_config, lever)
+    tof = cfg.tof_config(opts.stance)
     runs = [
-        FootRun(
-            foot,
-            server.port,
-            DualNavigator(dual_config, rate_hz=truth.rate_hz)
-            if opts.dual_imu
-            else make_navigator(nav_config, truth.rate_hz, tof=cfg.tof_config(opts.stance)),
-        )
+        foot_run(foot, server.port, nav_config, truth.rate_hz, tof=tof, dual_lever_b_m=lever if opts.dual_imu else None)
         for foot, server in zip(feet, servers, strict=True)
     ]
     # Faster than real time the emulator waits for footnav, so footnav waits for the Rerun loggers
@@ -312,7 +305,7 @@ def run_demo(opts: DemoOptions) -> int:
         await run_device_session(
             UnitAddress("serial", server.port),
             run.navigator,
-            run.sinks,
+            run.pipeline_sinks(),
             expect_samples=truth.t_s.size,
             source_done=server.finished.is_set,
             status=status.foot(run.foot),

@@ -58,8 +58,10 @@ def navigate_recording(
     The gyroscope's saturated stretches are reconstructed first (``footnav.pipeline.navigation.saturation``: this needs
     the whole recording, so it happens here and not in the live navigator).
 
-    Raises:
-        FootnavError: the recording never stands still, so it cannot be aligned.
+    Raises
+    ------
+    FootnavError
+        the recording never stands still, so it cannot be aligned.
     """
     config = NavConfig(profile=get_profile(profile or rec.profile), stance_levels=stance_levels)
     sat = reconstruct_saturated_rates(rec.t_s, rec.gyr_b_radps)
@@ -249,7 +251,7 @@ def export_capture(source: Path, out: Path, steps_out: Path | None = None) -> st
     one-line summary."""
     from footnav.app.commands.replay import ReplayOptions, run_replay
     from footnav.app.config import defaults
-    from footnav.views.convert import concat_batches
+    from footnav.pipeline.nav_types import concat_batches
 
     got: dict[str, list[NavBatch]] = {}
 

@@ -21,18 +21,17 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from footnav.app.calibration_store import StoredCalibration, calibration_dir, load_calibration
-from footnav.app.commands.live import FootRun, dual_nav_config, dual_view_sink, foot_sinks, notice
 from footnav.app.config import Config, apply_capture_settings
+from footnav.app.feet import FootRun, dual_view_sink, foot_run, foot_sinks, notice
 from footnav.app.session import CalibrationLookup, run_unit_session
 from footnav.app.status import Progress, StatusLine, input_handling
 from footnav.device.files.capture import EXPECTED, MCAP_MAGIC, CaptureReplayLink, summarize_capture
+from footnav.device.modes import RawImuMode
 from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
-from footnav.device.unit import OpenShoeUnit, RawImuMode
+from footnav.device.unit import OpenShoeUnit
 from footnav.pipeline.dual_imu.navigator import DualNavigator
 from footnav.pipeline.errors import InputFormatError
-from footnav.pipeline.navigation.navigator import Navigator
 from footnav.pipeline.runner import NavSink
-from footnav.pipeline.smoothing.stepwise import make_navigator
 from footnav.views.outputs import open_session_views
 
 FULL_SPEED_JOIN_SAMPLES = 1000
@@ -45,8 +44,10 @@ REPLAY_PUT_TIMEOUT_S = 60.0
 def detect_format(path: Path) -> str:
     """``footnav-capture`` for our MCAP captures; otherwise raise with what was expected.
 
-    Raises:
-        InputFormatError: missing file, or not a footnav capture (other tools' recordings included).
+    Raises
+    ------
+    InputFormatError
+        missing file, or not a footnav capture (other tools' recordings included).
     """
     if not path.exists():
         raise InputFormatError(f"no such file: {path}")
@@ -73,14 +74,20 @@ def detect_format(path: Path) -> str:
 class ReplayOptions:
     """What ``footnav replay`` was asked for.
 
-    Attributes:
-        speed: 1.0 = as captured, N = N times faster, ``math.inf`` = as fast as possible.
-        start_s, end_s: window in session seconds (device time since the first sample, the
-            recording's ``imu_time``), exact to the sample.
-        collect: tests: an extra NavSink per foot.
-        tof: pass the unit's ToF readings to the navigator (False: the same capture navigated
-            inertial-only, to measure what the ToF sensors add).
-        stance: stance detector mode with ToF units (None: as recorded in the capture).
+    Attributes
+    ----------
+    speed
+        1.0 = as captured, N = N times faster, ``math.inf`` = as fast as possible.
+    start_s, end_s
+        window in session seconds (device time since the first sample, the
+        recording's ``imu_time``), exact to the sample.
+    collect
+        tests: an extra NavSink per foot.
+    tof
+        pass the unit's ToF readings to the navigator (False: the same capture navigated
+        inertial-only, to measure what the ToF sensors add).
+    stance
+        stance detector mode with ToF units (None: as recorded in the capture).
     """
 
     path: Path
@@ -100,8 +107,10 @@ class ReplayOptions:
 def run_replay(opts: ReplayOptions) -> int:
     """Replay a capture; returns the exit code.
 
-    Raises:
-        InputFormatError: the file is not a footnav capture.
+    Raises
+    ------
+    InputFormatError
+        the file is not a footnav capture.
     """
     detect_format(opts.path)
     summary = summarize_capture(opts.path)
@@ -165,13 +174,16 @@ def run_replay(opts: ReplayOptions) -> int:
     for k, foot in enumerate(feet):
         recorded = info.units[feet.index(foot)].settings.get("stance", "inertial")
         rate_hz = rate_of.get(foot, 1000.0)
-        navigator: Navigator | DualNavigator
-        if foot in lever_of:  # a dual-IMU board: its raw two-IMU stream to the dual-IMU navigator
-            lever = lever_of[foot]
-            navigator = DualNavigator(dual_nav_config(nav_config, (lever[0], lever[1], lever[2])), rate_hz=rate_hz)
-        else:
-            navigator = make_navigator(nav_config, rate_hz, tof=cfg.tof_config(opts.stance or str(recorded)))
-        run = FootRun(foot, opts.path.name, navigator)
+        lever = lever_of.get(foot)  # a dual-IMU board: its raw two-IMU stream to the dual-IMU navigator
+        run = foot_run(
+            foot,
+            opts.path.name,
+            nav_config,
+            rate_hz,
+            tof=cfg.tof_config(opts.stance or str(recorded)),
+            dual_lever_b_m=None if lever is None else (lever[0], lever[1], lever[2]),
+        )
+        navigator = run.navigator
         foot_sinks(run, views, status, two_feet=len(feet) > 1, put_timeout_s=0.0 if realtime else REPLAY_PUT_TIMEOUT_S)
         if views is not None and isinstance(navigator, DualNavigator):
             run.sinks.append(dual_view_sink(navigator, views, foot))
@@ -219,7 +231,7 @@ def run_replay(opts: ReplayOptions) -> int:
         await run_unit_session(
             unit,
             run.navigator,
-            run.sinks,
+            run.pipeline_sinks(),
             start=True,  # the same handshake as live: the unit's answers are in the capture
             rate_divider_log2=rate_divider,
             expect_samples=expect if (isinstance(expect, int) and not windowed) else None,
@@ -236,7 +248,7 @@ def run_replay(opts: ReplayOptions) -> int:
             mode=RawImuMode(imu_mask=DUAL_IMU_MASK, rate_divider_log2=rate_divider) if run.foot in lever_of else None,
         )
 
-    from footnav.app.commands.live import run_feet
+    from footnav.app.feet import run_feet
 
     interrupted = False
     try:

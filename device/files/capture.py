@@ -510,7 +510,7 @@ def _summary_from_index(path: Path) -> CaptureSummary | None:
 
 
 class CaptureReplayLink:
-    """A :class:`footnav.device.unit.ByteLink` that returns one unit's captured device -> host bytes, one
+    """A :class:`footnav.device.links.base.ByteLink` that returns one unit's captured device -> host bytes, one
     captured read per :meth:`read`, so the unit driver frames and batches them exactly as it did live.
 
     Host timestamps: the driver stamps a batch with ``time.monotonic_ns()`` right after ``read``

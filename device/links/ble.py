@@ -229,7 +229,7 @@ class BleLinkStats:
 
 
 class BleLink:
-    """A byte stream to a shoe unit over BLE (a :class:`footnav.device.unit.ByteLink`).
+    """A byte stream to a shoe unit over BLE (a :class:`footnav.device.links.base.ByteLink`).
 
     Args:
         target: a Bluetooth address (or macOS UUID), an advertised local name, a ``BLEDevice`` from a

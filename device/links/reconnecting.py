@@ -1,6 +1,6 @@
 """Links that survive faults: reconnect with backoff, resume the unit's stream, record every gap.
 
-:class:`ReconnectingLink` is itself a :class:`footnav.device.unit.ByteLink`, so a unit driver uses it unchanged::
+:class:`ReconnectingLink` is itself a :class:`footnav.device.links.base.ByteLink`, so a unit driver uses it unchanged::
 
     link = ReconnectingLink.serial("/dev/ttyACM0")        # or ReconnectingLink.ble("MIMU22BL")
     await link.open()
@@ -51,8 +51,8 @@ from footnav.device.protocol.framer import DataPacket, Framer, PacketRun
 if TYPE_CHECKING:
     from types import TracebackType
 
+    from footnav.device.links.base import ByteLink
     from footnav.device.links.ble import BleBackend
-    from footnav.device.unit import ByteLink
 
 log = logging.getLogger(__name__)
 
@@ -170,7 +170,7 @@ class LinkHealth:
 
 
 class ReconnectingLink:
-    """A :class:`footnav.device.unit.ByteLink` that reconnects its inner link and resumes the unit's stream.
+    """A :class:`footnav.device.links.base.ByteLink` that reconnects its inner link and resumes the unit's stream.
 
     Args:
         connect: opens a fresh inner link; called by :meth:`open` and for every reconnect attempt.

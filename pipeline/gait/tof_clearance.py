@@ -160,17 +160,28 @@ def swing_clearance(
 ) -> F64:
     """Clearance of every sample of a whole recording, in swing from the whole swing's hits.
 
-    Args:
-        t_s: (n,) sample times, s.
-        pos_n_m: (n, 3) IMU positions.
-        stance: (n,) the zero-velocity detector's flags.
-        clearance_m: (n,) the live clearance (kept in stance, and in a swing without hits).
-        ranges: the readings of the same stretch (``NavBatch.ranges``), with their hit points.
-        snap_m: hits within this height of each other are on the same surface (``TofConfig.snap_m``).
-        margin_s: see :data:`MARGIN_S`.
-        min_support: see :data:`MIN_SUPPORT`.
+    Parameters
+    ----------
+    t_s
+        (n,) sample times, s.
+    pos_n_m
+        (n, 3) IMU positions.
+    stance
+        (n,) the zero-velocity detector's flags.
+    clearance_m
+        (n,) the live clearance (kept in stance, and in a swing without hits).
+    ranges
+        the readings of the same stretch (``NavBatch.ranges``), with their hit points.
+    snap_m
+        hits within this height of each other are on the same surface (``TofConfig.snap_m``).
+    margin_s
+        see :data:`MARGIN_S`.
+    min_support
+        see :data:`MIN_SUPPORT`.
 
-    Returns:
+    Returns
+    -------
+    F64
         (n,) clearance, m.
     """
     tracker = SwingClearanceTracker(snap_m, margin_s, min_support)

@@ -265,13 +265,6 @@ def _split(
     return window, rest
 
 
-def make_navigator(config: NavConfig, rate_hz: float, tof: TofConfig | None = None) -> Navigator:
-    """A live session's navigator: step-smoothing when ``config.step_smoothing``, else causal only."""
-    if config.step_smoothing:
-        return StepSmoothingNavigator(config, rate_hz, tof=tof)
-    return Navigator(config, rate_hz, tof=tof)
-
-
 def step_smooth_recording(
     t_s: F64,
     acc_b_mps2: F64,
