@@ -38,6 +38,7 @@ class FilterRun:
     Attributes:
         pos_n_m, vel_n_mps: (n, 3); quat_nb_wxyz: (n, 4); pos_cov_n_m2: (n, 4, 4) of (x, y, z, ψ).
         counters: (eskf.N_CNT,) the same counts as ``run_filter`` (see ``eskf.CNT_*``).
+        filter_state: (eskf.N_FILTER_STATE,) the same carried state (see ``eskf.STATE_*``).
         x, P: the final nominal state (16,) and error covariance (15, 15).
     """
 
@@ -46,6 +47,7 @@ class FilterRun:
     quat_nb_wxyz: F64
     pos_cov_n_m2: F64
     counters: NDArray[np.int64]
+    filter_state: NDArray[np.int64]
     x: F64
     P: F64
 
@@ -101,19 +103,24 @@ def _update(x: F64, P: F64, H: F64, y: F64, R: F64) -> tuple[F64, F64]:
 
 
 def _zaru(
-    x: F64, P: F64, gyr_b_radps: F64, par: F64, H_bg: F64, R_zaru: F64, counters: NDArray[np.int64]
+    x: F64,
+    P: F64,
+    gyr_b_radps: F64,
+    par: eskf.FilterParams,
+    H_bg: F64,
+    R_zaru: F64,
+    counters: NDArray[np.int64],
+    state: NDArray[np.int64],
 ) -> tuple[F64, F64]:
     """The χ²-gated zero-angular-rate update; a standing foot's turn about the vertical added to its
     noise after the first stance (``footnav.pipeline.navigation.eskf``)."""
     y = gyr_b_radps - x[13:16]
-    S = (
-        H_bg @ P @ H_bg.T + par[eskf.PAR_ZARU_GATE_SIG] ** 2 * _I3
-    )  # the gate's noise (footnav.pipeline.navigation.eskf)
-    if float(y @ np.linalg.solve(S, y)) < par[eskf.PAR_ZARU_GATE]:
+    S = H_bg @ P @ H_bg.T + par.zaru_gate_sig**2 * _I3  # the gate's noise (footnav.pipeline.navigation.eskf)
+    if float(y @ np.linalg.solve(S, y)) < par.zaru_gate:
         counters[eskf.CNT_ZARU] += 1
-        if counters[eskf.FLAG_STARTED] and counters[eskf.STATE_STANCE_RUN] > par[eskf.PAR_STANDING_AFTER]:
+        if state[eskf.STATE_STARTED] and state[eskf.STATE_STANCE_RUN] > par.standing_after:
             up_b = quat_to_mat(x[6:10])[2]
-            R_zaru = R_zaru + par[eskf.PAR_STANDING_TURN] ** 2 * np.outer(up_b, up_b)
+            R_zaru = R_zaru + par.standing_turn**2 * np.outer(up_b, up_b)
         return _update(x, P, H_bg, y, R_zaru)
     counters[eskf.CNT_ZARU_REJECTED] += 1
     return x, P
@@ -127,19 +134,20 @@ def run_filter_numpy(
     dt_s: F64,
     stance: NDArray[np.bool_],
     zupt_ratio: F64,
-    par: F64,
+    par: eskf.FilterParams,
     gyr_clip_var_b: F64 | None = None,
 ) -> FilterRun:
     """Run the filter sample by sample; arguments as ``footnav.pipeline.navigation.eskf.run_filter`` (not modified),
     ``gyr_clip_var_b`` (n, 3) or None for none."""
     n = acc_b_mps2.shape[0]
     x, P = x.astype(np.float64).copy(), P.astype(np.float64).copy()
-    g = par[eskf.PAR_G]
+    g = par.g
     g_n = np.array([0.0, 0.0, g])
     counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+    state = eskf.new_filter_state()
     H_v = _I15[_V]
     H_bg = _I15[_BG]
-    R_zaru = par[eskf.PAR_ZARU] ** 2 * _I3
+    R_zaru = par.zaru**2 * _I3
     pos, vel = np.empty((n, 3)), np.empty((n, 3))
     quat, pos_cov = np.empty((n, 4)), np.empty((n, 4, 4))
     for k in range(n):
@@ -149,7 +157,7 @@ def run_filter_numpy(
         if not (dt > 0.0 and math.isfinite(dt)):
             counters[eskf.CNT_BAD_DT] += 1
         else:
-            counters[eskf.CNT_GAP] += dt >= par[eskf.PAR_DT_MAX]
+            counters[eskf.CNT_GAP] += dt >= par.dt_max
             R = quat_to_mat(x[6:10])
             f2 = w2 = 0.0
             if bad:  # hold the nominal motion, let the uncertainty grow
@@ -173,38 +181,38 @@ def run_filter_numpy(
             F[_TH, _BG] = -dt * R
             q_block = [
                 0.0,
-                (par[eskf.PAR_SIG_ACC] ** 2 + par[eskf.PAR_ACC_SCALE] ** 2 * f2) * dt * dt,
-                (par[eskf.PAR_SIG_GYR] ** 2 + par[eskf.PAR_GYR_SCALE] ** 2 * w2) * dt * dt,
-                par[eskf.PAR_BA_RW] ** 2 * dt,
-                par[eskf.PAR_BG_RW] ** 2 * dt,
+                (par.sig_acc**2 + par.acc_scale**2 * f2) * dt * dt,
+                (par.sig_gyr**2 + par.gyr_scale**2 * w2) * dt * dt,
+                par.ba_rw**2 * dt,
+                par.bg_rw**2 * dt,
             ]
             Q = np.diag(np.repeat(q_block, 3))
             if gyr_clip_var_b is not None and not bad:  # rate noise along the clipped body axes
                 Q[_TH, _TH] += R @ np.diag(gyr_clip_var_b[k]) @ R.T * dt * dt
             P = F @ P @ F.T + Q
             P = 0.5 * (P + P.T)
-        counters[eskf.FLAG_LAST_REJECTED] = 0
+        state[eskf.STATE_LAST_REJECTED] = 0
         if stance[k]:
-            counters[eskf.STATE_STANCE_RUN] += 1
+            state[eskf.STATE_STANCE_RUN] += 1
         else:
-            counters[eskf.FLAG_STARTED] |= counters[eskf.STATE_STANCE_RUN] > 0
-            counters[eskf.STATE_STANCE_RUN] = 0
+            state[eskf.STATE_STARTED] |= state[eskf.STATE_STANCE_RUN] > 0
+            state[eskf.STATE_STANCE_RUN] = 0
         if stance[k] and not bad:
             omega = gyr_b_radps[k] - x[13:16]
-            r_zupt = par[eskf.PAR_ZUPT] ** 2 + par[eskf.PAR_ROLL_LEVER] ** 2 * float(omega @ omega)
+            r_zupt = par.zupt**2 + par.roll_lever**2 * float(omega @ omega)
             # vertical: + σ_T² T/γ, T/γ clamped to [0, 1] (NaN: 1)
             rho = float(np.clip(np.nan_to_num(zupt_ratio[k], nan=1.0), 0.0, 1.0))
-            r_v = r_zupt + par[eskf.PAR_ZUPT_VERT_STAT] ** 2 * rho
+            r_v = r_zupt + par.zupt_vert_stat**2 * rho
             R_v = np.diag([r_zupt, r_zupt, r_v])
-            unsure = not (zupt_ratio[k] <= par[eskf.PAR_ZUPT_GATE_RATIO])
+            unsure = not (zupt_ratio[k] <= par.zupt_gate_ratio)
             v = x[3:6]
-            if unsure and float(v @ np.linalg.solve(H_v @ P @ H_v.T + R_v, v)) > par[eskf.PAR_ZUPT_GATE]:
+            if unsure and float(v @ np.linalg.solve(H_v @ P @ H_v.T + R_v, v)) > par.zupt_gate:
                 counters[eskf.CNT_ZUPT_REJECTED] += 1  # the foot is moving: no update at this sample
-                counters[eskf.FLAG_LAST_REJECTED] = 1
+                state[eskf.STATE_LAST_REJECTED] = 1
             else:
                 x, P = _update(x, P, H_v, -x[3:6], R_v)
                 counters[eskf.CNT_UPDATES] += 1
-                x, P = _zaru(x, P, gyr_b_radps[k], par, H_bg, R_zaru, counters)
+                x, P = _zaru(x, P, gyr_b_radps[k], par, H_bg, R_zaru, counters, state)
         pos[k], vel[k], quat[k] = x[0:3], x[3:6], x[6:10]
         pos_cov[k] = P[np.ix_(_POS_YAW, _POS_YAW)]
-    return FilterRun(pos, vel, quat, pos_cov, counters, x, P)
+    return FilterRun(pos, vel, quat, pos_cov, counters, state, x, P)

@@ -6,7 +6,6 @@ import math
 
 import pytest
 from footnav.device.emulator.sensors.imu_errors import IMU_GRADES
-from footnav.pipeline.navigation import eskf
 from footnav.pipeline.navigation.navigator import filter_parameters
 from footnav.pipeline.navigation.profiles import get_profile
 
@@ -18,12 +17,12 @@ def test_per_sample_noise_and_bias_terms_match_the_emulator(rate_hz: float) -> N
     grade = IMU_GRADES["mpu6500x4"]
     profile = profile_of_grade(grade, get_profile("mpu6500x4"))
     par = filter_parameters(profile, rate_hz, 9.80665, 0.05)
-    assert par[eskf.PAR_SIG_ACC] == pytest.approx(grade.acc_noise_sigma_mps2(rate_hz), rel=1e-12)
-    assert par[eskf.PAR_SIG_GYR] == pytest.approx(grade.gyr_noise_sigma_radps(rate_hz), rel=1e-12)
-    assert par[eskf.PAR_ACC_SCALE] == 0.0 and par[eskf.PAR_GYR_SCALE] == 0.0
+    assert par.sig_acc == pytest.approx(grade.acc_noise_sigma_mps2(rate_hz), rel=1e-12)
+    assert par.sig_gyr == pytest.approx(grade.gyr_noise_sigma_radps(rate_hz), rel=1e-12)
+    assert par.acc_scale == 0.0 and par.gyr_scale == 0.0
     # the Gauss-Markov drift's driving density: its variance grows 2 σ² t / τ for t ≪ τ
     tau = grade.bias_correlation_time_s
-    assert par[eskf.PAR_BG_RW] ** 2 * tau == pytest.approx(2.0 * grade.gyr_bias_instability_radps**2, rel=1e-12)
+    assert par.bg_rw**2 * tau == pytest.approx(2.0 * grade.gyr_bias_instability_radps**2, rel=1e-12)
     assert profile.gyr_bias_init_radps == pytest.approx(
         math.hypot(grade.gyr_bias_sigma_radps, grade.gyr_bias_instability_radps)
     )

@@ -59,10 +59,11 @@ def test_compiled_filter_matches_numpy_reference() -> None:
     ref = run_filter_numpy(x, P, acc, gyr, dt, stance, ratio, par, var)
     x_c, P_c = x.copy(), P.copy()
     pos, vel, quat, pos_cov = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
-    counters = np.zeros(eskf.N_CNT, dtype=np.int64)
-    eskf.run_filter(x_c, P_c, acc, gyr, var, dt, stance, ratio, par, pos, vel, quat, pos_cov, counters)
+    counters, state = np.zeros(eskf.N_CNT, dtype=np.int64), eskf.new_filter_state()
+    eskf.run_filter(x_c, P_c, acc, gyr, var, dt, stance, ratio, par, pos, vel, quat, pos_cov, counters, state)
 
     np.testing.assert_array_equal(counters, ref.counters)
+    np.testing.assert_array_equal(state, ref.filter_state)
     assert counters[eskf.CNT_BAD_SAMPLE] == 1 and counters[eskf.CNT_BAD_DT] == 1 and counters[eskf.CNT_GAP] == 1
     assert counters[eskf.CNT_UPDATES] > 1000 and counters[eskf.CNT_ZARU] > 100 and counters[eskf.CNT_ZARU_REJECTED] > 0
     assert np.ptp(pos[:, 0]) > 3.0  # it walked
@@ -81,12 +82,12 @@ def test_batches_do_not_change_the_result() -> None:
     def run(cuts: list[int]) -> np.ndarray:
         x_c, P_c = x.copy(), P.copy()
         pos = np.empty((n, 3))
-        counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+        counters, state = np.zeros(eskf.N_CNT, dtype=np.int64), eskf.new_filter_state()
         for a, b in zip([0, *cuts], [*cuts, n], strict=True):
             m = b - a
             eskf.run_filter(
                 x_c, P_c, acc[a:b], gyr[a:b], var[a:b], dt[a:b], stance[a:b], ratio[a:b], par,
-                pos[a:b], np.empty((m, 3)), np.empty((m, 4)), np.empty((m, 4, 4)), counters,
+                pos[a:b], np.empty((m, 3)), np.empty((m, 4)), np.empty((m, 4, 4)), counters, state,
             )  # fmt: skip
         return pos
 

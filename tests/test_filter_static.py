@@ -170,8 +170,7 @@ def test_strapdown_step_is_second_order_on_exact_signals() -> None:
         n = len(truth)
         x = np.zeros(16)
         x[0:3], x[3:6], x[6:10] = truth.pos_n_m[0], truth.vel_n_mps[0], truth.quat_nb_wxyz[0]
-        par = np.zeros(eskf.N_PAR)
-        par[eskf.PAR_G], par[eskf.PAR_DT_MAX] = 9.80665, 1.0
+        par = eskf.FilterParams(*[0.0] * len(eskf.FilterParams._fields))._replace(g=9.80665, dt_max=1.0)
         dt = np.full(n, 1.0 / rate_hz)
         dt[0] = 0.0  # sample 0 is the initial state
         pos, vel, quat, cov = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
@@ -208,14 +207,15 @@ def test_zero_velocity_sample_of_a_moving_foot(ratio: float, applied: bool) -> N
     skipped and
     counted; one the detector is sure of is applied however far the filter's velocity is from zero."""
     x, P, acc, gyr, par = _moving_filter(1.9)
-    counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+    counters, state = np.zeros(eskf.N_CNT, dtype=np.int64), eskf.new_filter_state()
     out = np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 4)), np.empty((1, 4, 4))
     eskf.run_filter(
-        x, P, acc, gyr, NO_CLIPPED_RATES, np.array([1e-3]), np.array([True]), np.array([ratio]), par, *out, counters
-    )
+        x, P, acc, gyr, NO_CLIPPED_RATES, np.array([1e-3]), np.array([True]), np.array([ratio]), par, *out, counters,
+        state,
+    )  # fmt: skip
     assert counters[eskf.CNT_ZUPT_REJECTED] == (0 if applied else 1)
     assert counters[eskf.CNT_UPDATES] == (1 if applied else 0)
-    assert counters[eskf.FLAG_LAST_REJECTED] == (0 if applied else 1)
+    assert state[eskf.STATE_LAST_REJECTED] == (0 if applied else 1)
     # applied: with the velocity's σ equal to the update's noise, one update halves it
     assert (x[3] < 0.6 * 1.9) if applied else (x[3] == pytest.approx(1.9, abs=1e-3))
 
@@ -232,10 +232,10 @@ def test_zero_velocity_sample_near_rest_is_applied_when_unsure() -> None:
     assert counters[eskf.CNT_ZUPT_REJECTED] == 0 and counters[eskf.CNT_UPDATES] == 1
 
 
-def _standing_run(par: np.ndarray, first_still_s: float, pause_s: float, stand_s: float, turn_radps: np.ndarray):
+def _standing_run(par: eskf.FilterParams, first_still_s: float, pause_s: float, stand_s: float, turn_radps: np.ndarray):
     """A level unit, still throughout: a still start (the first stance), a pause the detector calls
     motion, then a long stance in which the gyroscope reads ``turn_radps`` (3,) more than its bias.
-    Returns the gyroscope bias estimate after each sample, (n, 3), and the stance run counter."""
+    Returns the gyroscope bias estimate after each sample, (n, 3), and the filter's carried state."""
     n1, n2, n3 = (round(s * RATE_HZ) for s in (first_still_s, pause_s, stand_s))
     n = n1 + n2 + n3
     _, acc, gyr = _still(n, 0.0, 0.0, np.zeros(3), seed=3)
@@ -249,16 +249,16 @@ def _standing_run(par: np.ndarray, first_still_s: float, pause_s: float, stand_s
     x = np.zeros(16)
     x[6] = 1.0
     P = np.diag(initial_error_sigmas(NavConfig(profile=prof), prof) ** 2)
-    counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+    counters, state = np.zeros(eskf.N_CNT, dtype=np.int64), eskf.new_filter_state()
     bias = np.empty((n, 3))
     out = np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 4)), np.empty((1, 4, 4))
-    for k in range(n):  # one sample per call: the counters carry the stance between calls, as live
+    for k in range(n):  # one sample per call: the filter state carries the stance between calls, as live
         eskf.run_filter(
             x, P, acc[k : k + 1], gyr[k : k + 1], NO_CLIPPED_RATES, np.array([1.0 / RATE_HZ]), stance[k : k + 1],
-            np.zeros(1), par, *out, counters,
+            np.zeros(1), par, *out, counters, state,
         )  # fmt: skip
         bias[k] = x[13:16]
-    return bias, counters, (n1, n2, n3)
+    return bias, state, (n1, n2, n3)
 
 
 def test_a_standing_foot_may_turn_about_the_vertical() -> None:
@@ -270,12 +270,11 @@ def test_a_standing_foot_may_turn_about_the_vertical() -> None:
     from footnav.pipeline.navigation.profiles import get_profile
 
     par = filter_parameters(get_profile("mpu6500x4"), RATE_HZ, 9.80665, 0.05)
-    plain = par.copy()
-    plain[eskf.PAR_STANDING_TURN] = 0.0
+    plain = par._replace(standing_turn=0.0)
     turn = np.radians([0.3, 0.0, 0.3])  # about body x (horizontal, level unit) and z (vertical)
-    standing, counters, (n1, n2, n3) = _standing_run(par, 3.0, 0.5, 8.0, turn)
+    standing, state, (n1, n2, n3) = _standing_run(par, 3.0, 0.5, 8.0, turn)
     full, _, _ = _standing_run(plain, 3.0, 0.5, 8.0, turn)
-    assert counters[eskf.FLAG_STARTED] == 1 and counters[eskf.STATE_STANCE_RUN] == n3
+    assert state[eskf.STATE_STARTED] == 1 and state[eskf.STATE_STANCE_RUN] == n3
     np.testing.assert_array_equal(standing[: n1 + n2], full[: n1 + n2])  # the still start is not touched
     after = n1 + n2 + round(STANDING_AFTER_S * RATE_HZ)
     np.testing.assert_array_equal(standing[:after], full[:after])  # nor the first 2 s of a stance

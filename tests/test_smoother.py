@@ -84,7 +84,7 @@ def test_result_does_not_depend_on_the_segment_length(walk) -> None:  # type: ig
 
 
 def test_storing_pass_reproduces_the_causal_filter(walk) -> None:  # type: ignore[no-untyped-def]
-    """``eskf._predict``/``_correct`` mirror ``run_filter``'s loop body: bit for bit, on every branch
+    """``_kernels._predict``/``_correct`` mirror ``run_filter``'s loop body: bit for bit, on every branch
     (clipped rates among them)."""
     truth, acc, gyr, _, _, _, _ = walk
     t, acc, gyr = truth.t_s.copy(), acc.copy(), gyr.copy()
@@ -98,15 +98,16 @@ def test_storing_pass_reproduces_the_causal_filter(walk) -> None:  # type: ignor
     var = clipped_rate_variance(gyr, clipped)
     x, P, par, dt, stance, ratio = _initial(t, acc, gyr)
     x2, P2 = x.copy(), P.copy()
-    counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+    counters, state = np.zeros(eskf.N_CNT, dtype=np.int64), eskf.new_filter_state()
     out = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))
-    eskf.run_filter(x, P, acc, gyr, var, dt, stance, ratio, par, *out, counters)
+    eskf.run_filter(x, P, acc, gyr, var, dt, stance, ratio, par, *out, counters, state)
     assert counters[eskf.CNT_BAD_SAMPLE] == 5 and counters[eskf.CNT_BAD_DT] == 1 and counters[eskf.CNT_GAP] == 1
     assert 50 < np.count_nonzero(var.any(axis=1)) < n // 10
     xf, Pf, _, _, fn, _ = bufs = _buffers(n)
-    counters2 = np.zeros(eskf.N_CNT, dtype=np.int64)
-    _storing_pass(x2, P2, acc, gyr, var, dt, stance, ratio, par, *bufs, counters2)
+    counters2, state2 = np.zeros(eskf.N_CNT, dtype=np.int64), eskf.new_filter_state()
+    _storing_pass(x2, P2, acc, gyr, var, dt, stance, ratio, par, *bufs, counters2, state2)
     np.testing.assert_array_equal(counters2, counters)
+    np.testing.assert_array_equal(state2, state)
     np.testing.assert_array_equal(xf[:, :3], out[0])
     np.testing.assert_array_equal(xf[:, 3:6], out[1])
     np.testing.assert_array_equal(xf[:, 6:10], out[2])
@@ -123,14 +124,15 @@ def test_backward_pass_matches_a_dense_rts_smoother(walk) -> None:  # type: igno
     n = 3000
     a = 2000  # start at sample a of the walk: stance and swing both occur in the next 3000
     x, P, par, dt, stance, ratio = _initial(truth.t_s[: a + n], acc[: a + n], gyr[: a + n])
-    counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+    counters, state = np.zeros(eskf.N_CNT, dtype=np.int64), eskf.new_filter_state()
     pos, vel, quat, cov = np.empty((a, 3)), np.empty((a, 3)), np.empty((a, 4)), np.empty((a, 4, 4))
     eskf.run_filter(
-        x, P, acc[:a], gyr[:a], NO_CLIPPED_RATES, dt[:a], stance[:a], ratio[:a], par, pos, vel, quat, cov, counters
-    )
+        x, P, acc[:a], gyr[:a], NO_CLIPPED_RATES, dt[:a], stance[:a], ratio[:a], par, pos, vel, quat, cov, counters,
+        state,
+    )  # fmt: skip
     xf, Pf, xp, Pp, fn, Rm = bufs = _buffers(n)
     sl = slice(a, a + n)
-    _storing_pass(x, P, acc[sl], gyr[sl], NO_CLIPPED_RATES, dt[sl], stance[sl], ratio[sl], par, *bufs, counters)
+    _storing_pass(x, P, acc[sl], gyr[sl], NO_CLIPPED_RATES, dt[sl], stance[sl], ratio[sl], par, *bufs, counters, state)
     assert stance[sl].any() and not stance[sl].all()
     ds, Ps, xs = np.zeros(15), Pf[-1].copy(), xf[-1].copy()
     out = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4, 4))

@@ -22,6 +22,7 @@ from footnav.pipeline.gait.clearance import StrideClearance, StrideClearanceTrac
 from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.navigation import eskf
 from footnav.pipeline.navigation.alignment import Alignment, align_from_still
+from footnav.pipeline.navigation.params import FilterParams
 from footnav.pipeline.navigation.profiles import G0_MPS2, UnitProfile, get_profile
 from footnav.pipeline.navigation.saturation import clipped_rate_variance
 from footnav.pipeline.samples import ImuBatch
@@ -153,8 +154,8 @@ def initial_error_sigmas(cfg: InitialSigmas, profile: UnitProfile, imus: int = 1
     )
 
 
-def filter_start(config: NavConfig, rate_hz: float, alignment: Alignment) -> tuple[F64, F64, F64]:
-    """The filter's nominal state (16,), covariance (15, 15) and parameters (``eskf.N_PAR``,) after
+def filter_start(config: NavConfig, rate_hz: float, alignment: Alignment) -> tuple[F64, F64, FilterParams]:
+    """The filter's nominal state (16,), covariance (15, 15) and parameters (``FilterParams``) after
     the alignment ``alignment`` of a still start, as the navigator starts it: the aligned attitude at
     the origin, at rest; the biases at 0, their prior the profile's (a quiet foot may still turn)."""
     x = np.zeros(16)
@@ -164,34 +165,50 @@ def filter_start(config: NavConfig, rate_hz: float, alignment: Alignment) -> tup
     return x, P, par
 
 
-def filter_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float, dt_max_s: float) -> F64:
-    """Parameter vector of ``eskf.run_filter`` from a unit profile.
+def filter_parameters(profile: UnitProfile, rate_hz: float, gravity_mps2: float, dt_max_s: float) -> FilterParams:
+    """Parameters of ``eskf.run_filter`` from a unit profile.
 
     The per-sample process noise combines the sensor's white noise at this rate (σ = density·√rate)
     with the profile's motion noise; the zero-angular-rate gate uses the gyroscope's white noise alone
     (``footnav.pipeline.navigation.eskf``).
+
+    Parameters
+    ----------
+    profile : UnitProfile
+        The unit's noise and error figures.
+    rate_hz : float
+        Sample rate, Hz.
+    gravity_mps2 : float
+        Local gravity, m/s².
+    dt_max_s : float
+        Intervals this long or longer are gaps, s.
+
+    Returns
+    -------
+    FilterParams
+        The filter's parameters.
     """
-    par = np.zeros(eskf.N_PAR)
-    par[eskf.PAR_SIG_ACC] = math.hypot(profile.acc_noise_mps2_rthz * math.sqrt(rate_hz), profile.motion_acc_mps2)
-    par[eskf.PAR_SIG_GYR] = math.hypot(profile.gyr_noise_radps_rthz * math.sqrt(rate_hz), profile.motion_gyr_radps)
-    par[eskf.PAR_BA_RW] = profile.acc_bias_rw_mps3_rthz
-    par[eskf.PAR_BG_RW] = profile.gyr_bias_rw_radps2_rthz
-    par[eskf.PAR_ZUPT] = profile.zupt_sigma_mps
     gyr_white_radps = profile.gyr_noise_radps_rthz * math.sqrt(rate_hz)
-    par[eskf.PAR_ZARU] = math.hypot(profile.zaru_sigma_radps, gyr_white_radps)
-    par[eskf.PAR_ZARU_GATE_SIG] = gyr_white_radps
-    par[eskf.PAR_G] = gravity_mps2
-    par[eskf.PAR_DT_MAX] = dt_max_s
-    par[eskf.PAR_ZARU_GATE] = ZARU_GATE_CHI2_3DOF
-    par[eskf.PAR_ZUPT_GATE] = ZUPT_GATE_NIS
-    par[eskf.PAR_ZUPT_GATE_RATIO] = ZUPT_GATE_RATIO
-    par[eskf.PAR_ROLL_LEVER] = profile.roll_lever_m
-    par[eskf.PAR_ACC_SCALE] = profile.acc_scale_error
-    par[eskf.PAR_GYR_SCALE] = profile.gyr_scale_error
-    par[eskf.PAR_ZUPT_VERT_STAT] = profile.zupt_vertical_sigma_mps
-    par[eskf.PAR_STANDING_TURN] = STANDING_TURN_SIGMA_RADPS
-    par[eskf.PAR_STANDING_AFTER] = STANDING_AFTER_S * rate_hz
-    return par
+    return FilterParams(
+        sig_acc=math.hypot(profile.acc_noise_mps2_rthz * math.sqrt(rate_hz), profile.motion_acc_mps2),
+        sig_gyr=math.hypot(profile.gyr_noise_radps_rthz * math.sqrt(rate_hz), profile.motion_gyr_radps),
+        ba_rw=float(profile.acc_bias_rw_mps3_rthz),
+        bg_rw=float(profile.gyr_bias_rw_radps2_rthz),
+        zupt=float(profile.zupt_sigma_mps),
+        zaru=math.hypot(profile.zaru_sigma_radps, gyr_white_radps),
+        g=float(gravity_mps2),
+        dt_max=float(dt_max_s),
+        zaru_gate=float(ZARU_GATE_CHI2_3DOF),
+        roll_lever=float(profile.roll_lever_m),
+        acc_scale=float(profile.acc_scale_error),
+        gyr_scale=float(profile.gyr_scale_error),
+        zupt_vert_stat=float(profile.zupt_vertical_sigma_mps),
+        zaru_gate_sig=float(gyr_white_radps),
+        zupt_gate=float(ZUPT_GATE_NIS),
+        zupt_gate_ratio=float(ZUPT_GATE_RATIO),
+        standing_turn=float(STANDING_TURN_SIGMA_RADPS),
+        standing_after=float(STANDING_AFTER_S * rate_hz),
+    )
 
 
 class Navigator:
@@ -229,9 +246,10 @@ class Navigator:
         self._pending: list[tuple[ImuBatch, F64, F64, NDArray[np.bool_]]] = []
         self._x: F64 | None = None
         self._P = np.zeros((eskf.N_STATE, eskf.N_STATE))
-        self._par = np.zeros(eskf.N_PAR)
+        self._par = filter_parameters(config.profile, rate_hz, G0_MPS2, config.dt_max_s)  # until aligned
         self._t_last = math.nan
         self._counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+        self._filter_state = eskf.new_filter_state()
         self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels), rate_hz)
         self.level_updates: list[tuple[int, float]] | None = None
         """When a list: each stance height update, as (sample index since alignment, level height)."""
@@ -394,10 +412,10 @@ class Navigator:
             if end > a:
                 eskf.run_filter(
                     self._x, self._P, acc[a:end], gyr[a:end], gyr_var[a:end], dt[a:end], still[a:end], ratio[a:end],
-                    self._par, pos[a:end], vel[a:end], quat[a:end], cov[a:end], self._counters,
+                    self._par, pos[a:end], vel[a:end], quat[a:end], cov[a:end], self._counters, self._filter_state,
                 )  # fmt: skip
             # a stance whose update sample the filter found moving (``footnav.pipeline.navigation.eskf``) gives no level
-            if b is not None and not self._counters[eskf.FLAG_LAST_REJECTED]:
+            if b is not None and not self._filter_state[eskf.STATE_LAST_REJECTED]:
                 self._x, self._P, z_level = self.levels.stance_update(self._x, self._P)
                 if self.level_updates is not None and math.isfinite(z_level):
                     self.level_updates.append((self.stats.samples_out + b - 1, z_level))
@@ -453,6 +471,7 @@ class Navigator:
                     quat[a:b],
                     cov[a:b],
                     cnt,
+                    self._filter_state,
                 )
                 self.tof.sync(x)
                 floor_z[a:b], floor_c[a:b] = self.tof.floor_under(pos[a:b], still[a:b])

@@ -66,21 +66,21 @@ import math
 import numpy as np
 from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.navigation import eskf
+from footnav.pipeline.navigation._kernels import _correct, _predict, track_stance
 from footnav.pipeline.navigation.eskf import (
     BA0,
     BG0,
     N_CNT,
+    N_FILTER_STATE,
     N_STATE,
     P0,
     TH0,
     V0,
-    _correct,
-    _predict,
     rotate_attitude_block,
     sample_intervals,
-    track_stance,
 )
 from footnav.pipeline.navigation.navigator import NavConfig, Navigator, NavStats, clip_variance, nav_batch, zupt_ratio
+from footnav.pipeline.navigation.params import FilterParams
 from footnav.pipeline.navigation.quaternion import quat_from_rotvec_s, quat_mul_s
 from footnav.pipeline.samples import ImuBatch
 from footnav.pipeline.stance.levels import StanceLevelParams, StanceLevels, height_update
@@ -122,7 +122,7 @@ def _storing_pass(
     dt_s: F64,
     stance: NDArray[np.bool_],
     zupt_ratio: F64,
-    par: F64,
+    par: FilterParams,
     xf: F64,
     Pf: F64,
     xp: F64,
@@ -130,6 +130,7 @@ def _storing_pass(
     fn: F64,
     Rm: F64,
     counters: NDArray[np.int64],
+    filter_state: NDArray[np.int64],
 ) -> None:
     """The causal filter over a segment (``run_filter``'s steps), keeping what the smoother needs.
     The stance height updates are applied between calls (``smooth_recording``).
@@ -137,8 +138,8 @@ def _storing_pass(
     For sample j: ``xp[j]``, ``Pp[j]`` nominal state and covariance after the propagation (before any
     update), ``xf[j]``, ``Pf[j]`` after the updates, ``fn[j]``, ``Rm[j]`` and ``dt_s[j]`` the blocks of
     F over the interval ending at j (``fn[j, 0]`` is NaN where there was no propagation, Δt ≤ 0).
-    ``x``, ``P`` and ``counters`` (``eskf.N_CNT``: the stance the filter is in) are advanced in place,
-    as by ``run_filter``.
+    ``x``, ``P``, ``counters`` and ``filter_state`` (the stance the filter is in) are advanced in
+    place, as by ``run_filter``.
     """  # pragma: no cover
     n = acc_b_mps2.shape[0]
     if (
@@ -154,6 +155,7 @@ def _storing_pass(
         or fn.shape[0] < n
         or Rm.shape[0] < n
         or counters.shape[0] != N_CNT
+        or filter_state.shape[0] != N_FILTER_STATE
     ):
         raise ValueError("_storing_pass: inconsistent array shapes")
     q_diag = np.zeros(N_STATE)
@@ -179,9 +181,9 @@ def _storing_pass(
                     Rm[k, r, c] = R0[r, c]
         else:
             fn[k, 0] = math.nan
-        track_stance(stance[k], counters)
+        track_stance(stance[k], filter_state)
         if stance[k] and not bad:
-            _correct(x, P, gyr_b_radps, zupt_ratio, k, par, y, work, counters)
+            _correct(x, P, gyr_b_radps, zupt_ratio, k, par, y, work, counters, filter_state)
         for i in range(16):
             xf[k, i] = x[i]
         for i in range(N_STATE):
@@ -191,7 +193,8 @@ def _storing_pass(
 
 def _storing_segment(
     x: F64, P: F64, lo: int, hi: int, a: int, acc: F64, gyr: F64, gyr_var: F64, dt: F64, stance: NDArray[np.bool_],
-    ratio: F64, par: F64, xf: F64, Pf: F64, xp: F64, Pp: F64, fn: F64, Rm: F64, counters: NDArray[np.int64],
+    ratio: F64, par: FilterParams, xf: F64, Pf: F64, xp: F64, Pp: F64, fn: F64, Rm: F64,
+    filter_state: NDArray[np.int64],
 ) -> None:  # fmt: skip
     """:func:`_storing_pass` over samples lo..hi−1 of the recording, into the buffers of the segment
     that starts at sample ``a``."""
@@ -199,7 +202,7 @@ def _storing_segment(
         b = slice(lo - a, None)
         _storing_pass(
             x, P, acc[lo:hi], gyr[lo:hi], gyr_var[lo:hi], dt[lo:hi], stance[lo:hi], ratio[lo:hi], par,
-            xf[b], Pf[b], xp[b], Pp[b], fn[b], Rm[b], counters,
+            xf[b], Pf[b], xp[b], Pp[b], fn[b], Rm[b], np.zeros(N_CNT, dtype=np.int64), filter_state,
         )  # fmt: skip
 
 
@@ -411,15 +414,15 @@ def store_span(
     a: int,
     stop: int,
     inputs: tuple[F64, F64, F64, F64, NDArray[np.bool_], F64],
-    par: F64,
+    par: FilterParams,
     level_updates: list[tuple[int, float]],
     level_at: list[int],
     level_r: float,
     buffers: tuple[F64, F64, F64, F64, F64, F64],
     work: F64,
-    counters: NDArray[np.int64],
+    filter_state: NDArray[np.int64],
 ) -> None:
-    """The filter from ``x``, ``P`` and ``counters`` (advanced in place) over samples ``a`` .. ``stop`` − 1 of
+    """The filter from ``x``, ``P`` and ``filter_state`` (advanced in place) over samples ``a`` .. ``stop`` − 1 of
     ``inputs`` (acc, gyr, gyr_var, dt, stance, T/γ, indexed alike), stored into ``buffers`` (xf, Pf,
     xp, Pp, fn, Rm, row 0 = sample ``a``) for :func:`_backward_pass`, with each stance height update
     (k, z) of ``level_updates`` (``level_at`` their k, sorted) for a ≤ k < stop applied after sample k.
@@ -431,11 +434,11 @@ def store_span(
     lo = a
     for j in range(bisect.bisect_left(level_at, a), bisect.bisect_left(level_at, stop)):
         k, z = level_updates[j]
-        _storing_segment(x, P, lo, k + 1, a, *inputs, par, *buffers, counters)
+        _storing_segment(x, P, lo, k + 1, a, *inputs, par, *buffers, filter_state)
         height_update(x, P, -1, z, level_r, work)
         xf[k - a], Pf[k - a] = x, P
         lo = k + 1
-    _storing_segment(x, P, lo, stop, a, *inputs, par, *buffers, counters)
+    _storing_segment(x, P, lo, stop, a, *inputs, par, *buffers, filter_state)
 
 
 class _CheckpointingNavigator(Navigator):
@@ -455,7 +458,7 @@ class _CheckpointingNavigator(Navigator):
         self.checkpoints: list[tuple[int, F64, F64, float, int, NDArray[np.int64]]] = []
         """Per segment: first sample, x, P, the time before it, how many stance height updates had
         been applied (one due after the sample before the segment is applied in the segment's own
-        run, after its checkpoint), and the filter's counters (the stance it is in)."""
+        run, after its checkpoint), and the filter's carried state (the stance it is in)."""
         self.inputs: list[tuple[ImuBatch, NDArray[np.bool_], F64]] = []  # samples, stance, T/γ
 
     def _run(self, batch: ImuBatch, stat: F64, threshold: F64, still: NDArray[np.bool_]) -> NavBatch:
@@ -469,7 +472,7 @@ class _CheckpointingNavigator(Navigator):
             b = min(n, a + seg)
             done = len(self.level_updates or ())
             self.checkpoints.append(
-                (offset + a, self._x.copy(), self._P.copy(), self._t_last, done, self._counters.copy())
+                (offset + a, self._x.copy(), self._P.copy(), self._t_last, done, self._filter_state.copy())
             )
             out = super()._run(batch.select(slice(a, b)), stat[a:b], threshold[a:b], still[a:b])
             pos[a:b], vel[a:b], quat[a:b], cov[a:b] = out.pos_n_m, out.vel_n_mps, out.quat_nb_wxyz, out.cov_pos_yaw
@@ -541,7 +544,7 @@ def smooth_recording(
     ds, Ps, xs = np.zeros(eskf.N_STATE), np.empty((eskf.N_STATE, eskf.N_STATE)), np.empty(16)
     starts = [c[0] for c in nav.checkpoints] + [n]
     for i in range(len(nav.checkpoints) - 1, -1, -1):
-        a, x0, P0_, _, done, counters0 = nav.checkpoints[i]
+        a, x0, P0_, _, done, state0 = nav.checkpoints[i]
         end = starts[i + 1]
         is_last = end == n
         stop = end if is_last else end + 1  # one sample of overlap: the next segment's first
@@ -552,7 +555,7 @@ def smooth_recording(
                 height_update(x, P, -1, z, level_r, work)
         inputs = (acc, gyr, gyr_var, dt, stance, ratio)
         buffers = (xf, Pf, xp, Pp, fn, Rm)
-        store_span(x, P, a, stop, inputs, nav._par, level_updates, level_at, level_r, buffers, work, counters0.copy())
+        store_span(x, P, a, stop, inputs, nav._par, level_updates, level_at, level_r, buffers, work, state0.copy())
         if is_last:
             ds[:] = 0.0
             Ps[:] = Pf[m - 1]

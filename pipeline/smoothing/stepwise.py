@@ -95,7 +95,7 @@ class StepSmoothingNavigator(Navigator):
         self.level_updates = []
         self.close_after = max(1, round(close_after_s * rate_hz))
         self.max_window = max(self.close_after + 1, round(max_window_s * rate_hz))
-        self._checkpoint: tuple[F64, F64, int, NDArray[np.int64]] | None = None  # x, P, level updates, counters
+        self._checkpoint: tuple[F64, F64, int, NDArray[np.int64]] | None = None  # x, P, level updates, filter state
         self._window_start = 0  # index of the open window's first sample (0: first after alignment)
         self._pieces: list[tuple[int, tuple[NDArray[np.generic], ...]]] = []  # (first index, inputs)
         self._work = np.empty((2, eskf.N_STATE))
@@ -123,9 +123,9 @@ class StepSmoothingNavigator(Navigator):
         if not self.smoothing:
             return super()._run(batch, stat, threshold, still)
         if self._checkpoint is None:
-            self._checkpoint = (self._x.copy(), self._P.copy(), 0, self._counters.copy())
+            self._checkpoint = (self._x.copy(), self._P.copy(), 0, self._filter_state.copy())
         first = self.stats.samples_out
-        run0 = int(self._counters[eskf.STATE_STANCE_RUN])  # stance samples in a row before this batch
+        run0 = int(self._filter_state[eskf.STATE_STANCE_RUN])  # stance samples in a row before this batch
         out = super()._run(batch, stat, threshold, still)
         assert self._filter_inputs is not None
         self._pieces.append((first, (*self._filter_inputs, batch.t_s, out.pos_n_m[:, 2] - out.clearance_m)))
@@ -171,13 +171,13 @@ class StepSmoothingNavigator(Navigator):
         """Smooth the open window up to sample ``b`` and open the next one after it."""
         assert self._checkpoint is not None
         a = self._window_start
-        x0, P0, applied, counters0 = self._checkpoint
+        x0, P0, applied, state0 = self._checkpoint
         window, rest = _split(self._pieces, a, b)
         self._pieces = rest
         acc, gyr, gyr_var, dt, ratio, t, floor = (cast(F64, window[i]) for i in (0, 1, 2, 3, 5, 6, 7))
         still = cast(NDArray[np.bool_], window[4])
         m = b - a + 1
-        x, P, counters = x0.copy(), P0.copy(), counters0.copy()
+        x, P, filter_state = x0.copy(), P0.copy(), state0.copy()
         level_r = self.levels.params.sigma_m**2
         updates = self.level_updates or []
         for k, z in updates[applied:]:
@@ -186,10 +186,12 @@ class StepSmoothingNavigator(Navigator):
         local = [(k - a, z) for k, z in updates[applied:] if a <= k <= b]
         buffers = _buffers(m)
         inputs = (acc, gyr, gyr_var, dt, still, ratio)
-        store_span(x, P, 0, m, inputs, self._par, local, [k for k, _ in local], level_r, buffers, self._work, counters)
+        store_span(
+            x, P, 0, m, inputs, self._par, local, [k for k, _ in local], level_r, buffers, self._work, filter_state
+        )
         while applied < len(updates) and updates[applied][0] <= b:  # in order of their samples
             applied += 1
-        self._checkpoint = (x, P, applied, counters)
+        self._checkpoint = (x, P, applied, filter_state)
         self._window_start = b + 1
         self.closes.append(b)
         xf, Pf, xp, Pp, fn, Rm = buffers
@@ -226,14 +228,15 @@ def _load_kernels() -> None:
     acc, gyr = np.tile([0.0, 0.0, g], (m, 1)), np.zeros((m, 3))
     x, P = np.zeros(16), np.eye(eskf.N_STATE) * 1e-4
     x[6] = 1.0
-    par = np.zeros(eskf.N_PAR)
-    par[[eskf.PAR_SIG_ACC, eskf.PAR_SIG_GYR, eskf.PAR_ZUPT, eskf.PAR_ZARU, eskf.PAR_ZARU_GATE_SIG]] = 0.01
-    par[[eskf.PAR_G, eskf.PAR_DT_MAX, eskf.PAR_ZARU_GATE, eskf.PAR_ZUPT_GATE]] = (g, 1.0, 7.8, 100.0)
+    par = (
+        eskf.FilterParams(*[0.0] * len(eskf.FilterParams._fields))
+        ._replace(sig_acc=0.01, sig_gyr=0.01, zupt=0.01, zaru=0.01, zaru_gate_sig=0.01)
+        ._replace(g=g, dt_max=1.0, zaru_gate=7.8, zupt_gate=100.0)
+    )
     buffers = _buffers(m)
     dt, still, ratio = np.full(m, 0.001), np.ones(m, dtype=np.bool_), np.zeros(m)
     inputs = (acc, gyr, np.zeros((m, 3)), dt, still, ratio)
-    counters = np.zeros(eskf.N_CNT, dtype=np.int64)
-    store_span(x, P, 0, m, inputs, par, [], [], 1e-4, buffers, np.empty((2, eskf.N_STATE)), counters)
+    store_span(x, P, 0, m, inputs, par, [], [], 1e-4, buffers, np.empty((2, eskf.N_STATE)), eskf.new_filter_state())
     xf, Pf, xp, Pp, fn, Rm = buffers
     out = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 4))
     ds, Ps, xs = np.zeros(eskf.N_STATE), Pf[-1].copy(), xf[-1].copy()
