@@ -86,8 +86,10 @@ def save_calibration(
 ) -> Path:
     """Write (or replace) the unit's calibration file atomically; returns its path.
 
-    Raises:
-        OSError: the folder cannot be created or written.
+    Raises
+    ------
+    OSError
+        the folder cannot be created or written.
     """
     folder.mkdir(parents=True, exist_ok=True)
     path = calibration_path(folder, mcu_id)
@@ -109,8 +111,10 @@ def save_calibration(
 def load_calibration(folder: Path, mcu_id: bytes) -> StoredCalibration | None:
     """The unit's calibration file, or None if there is none.
 
-    Raises:
-        CalibrationError: the file exists but cannot be read or is not a footnav calibration.
+    Raises
+    ------
+    CalibrationError
+        the file exists but cannot be read or is not a footnav calibration.
     """
     path = calibration_path(folder, mcu_id)
     if not path.is_file():

@@ -14,7 +14,11 @@ from footnav.app.choices import AXIS_ERRORS, IMU_GRADES, PATHS, PROFILES, RECORD
 from footnav.pipeline.errors import FootnavError
 
 if TYPE_CHECKING:
+    from typing import TypeAlias
+
     from footnav.app.config import Config
+
+    Commands: TypeAlias = argparse._SubParsersAction[argparse.ArgumentParser]  # the sub-command table
 
 
 def _positive(text: str) -> float:
@@ -65,7 +69,7 @@ def _add_step_smoothing_arg(p: argparse.ArgumentParser) -> None:
         "--step-smoothing",
         action="store_true",
         default=None,
-        help="also show each step smoothed once it has ended ([filter] step_smoothing; README, Accuracy)",
+        help="also show each step smoothed once it has ended ([filter] step_smoothing)",
     )
 
 
@@ -88,6 +92,19 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug detail to stderr")
     sub = parser.add_subparsers(dest="command", required=True)
 
+    _add_demo_command(sub)
+    _add_live_command(sub)
+    _add_calibrate_command(sub)
+    _add_scan_command(sub)
+    _add_replay_command(sub)
+    _add_export_command(sub)
+    _add_evaluate_command(sub)
+    _add_experiment_command(sub)
+    _add_config_command(sub)
+    return parser
+
+
+def _add_demo_command(sub: Commands) -> None:
     demo = sub.add_parser("demo", help="run everything against the built-in emulated shoe (no hardware)")
     demo.add_argument("--path", choices=PATHS, default="rectangle", help="walking path (default: rectangle, 18 × 9 m)")
     demo.add_argument(
@@ -151,6 +168,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="emulate the multi-sensor unit: three ToF range sensors and a barometer, fused for foot clearance",
     )
 
+
+def _add_live_command(sub: Commands) -> None:
     live = sub.add_parser("live", help="navigate one connected unit, or two (--left/--right), over USB serial or BLE")
     live.add_argument("--port", help="serial port of the unit, e.g. /dev/ttyACM0 (or ble:NAME)")
     live.add_argument(
@@ -194,6 +213,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_output_args(live, capture=True)
 
+
+def _add_calibrate_command(sub: Commands) -> None:
     cal = sub.add_parser(
         "calibrate",
         help="field calibration of the unit's IMU (icosahedron procedure); saved by MCU id, applied automatically",
@@ -233,9 +254,13 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--no-capture", action="store_true", help="do not write a capture of the procedure")
     _add_config_args(cal, profile=False)
 
+
+def _add_scan_command(sub: Commands) -> None:
     scan = sub.add_parser("scan", help="list serial ports and BLE devices that look like shoe units")
     scan.add_argument("--timeout", type=_positive, default=5.0, metavar="S", help="how long to scan BLE (default 5 s)")
 
+
+def _add_replay_command(sub: Commands) -> None:
     replay = sub.add_parser("replay", help="replay a footnav capture (.mcap) through the same pipeline")
     replay.add_argument("file", type=Path, metavar="FILE", help="a capture written by footnav live/demo")
     replay.add_argument("--speed", type=_pace, default=math.inf, metavar="1x|Nx|max", help="replay pace (default max)")
@@ -251,6 +276,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_stance_arg(replay, default=None)
     _add_output_args(replay, capture=False)
 
+
+def _add_export_command(sub: Commands) -> None:
     export = sub.add_parser("export", help="navigate a recording and write one CSV row per sample")
     export.add_argument(
         "input", type=Path, metavar="INPUT", help="a PyShoe .mat, x-io CSV, OpenShoe log, CSV, or a footnav capture"
@@ -265,23 +292,28 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_recording_args(export)
 
+
+def _add_evaluate_command(sub: Commands) -> None:
     evaluate = sub.add_parser("evaluate", help="accuracy on recordings with ground truth or a closed loop")
     evaluate.add_argument("paths", type=Path, nargs="+", metavar="PATH", help="recordings, or folders of them")
     _add_smooth_arg(evaluate)
     _add_levels_arg(evaluate)
 
+
+def _add_experiment_command(sub: Commands) -> None:
     # the experiments' own options are parsed by run_experiment, which imports their modules
     experiment = sub.add_parser(
         "experiment", add_help=False, help="run a reproducible emulator experiment and print its table"
     )
     experiment.set_defaults(experiment_argv=[])
 
+
+def _add_config_command(sub: Commands) -> None:
     config = sub.add_parser("config", help="show the effective configuration and where each value came from")
     _add_config_args(config)
     config.add_argument("--rate-divider", type=int, default=None, choices=range(7), metavar="K")
     config.add_argument("--sessions", type=Path, metavar="DIR", help="capture folder")
     config.add_argument("--no-capture", action="store_true", help="as the live option")
-    return parser
 
 
 def _add_recording_args(parser: argparse.ArgumentParser) -> None:
@@ -320,7 +352,7 @@ def _add_levels_arg(parser: argparse.ArgumentParser) -> None:
         "--no-stance-levels",
         dest="stance_levels",
         action="store_false",
-        help="zero-velocity aiding alone: no stance height levels (README, Accuracy)",
+        help="zero-velocity aiding alone: no stance height levels",
     )
 
 
@@ -506,7 +538,7 @@ def _demo(args: argparse.Namespace) -> int:
 def _experiment(args: argparse.Namespace) -> int:
     from footnav.app.experiments import experiment_parser, run_experiment
 
-    return run_experiment(experiment_parser().parse_args(args.experiment_argv))
+    return run_experiment(experiment_parser(args.experiment_argv).parse_args(args.experiment_argv))
 
 
 def main(argv: list[str] | None = None) -> int:

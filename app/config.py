@@ -7,39 +7,27 @@ The file (TOML, read with :mod:`tomllib`)::
     sessions_dir = "sessions"   # capture files go here
     capture = true              # capture every live session (and the demo)
     capture_flush_s = 1.0       # captured bytes reach the OS at most this late (what a crash can lose)
-
     [unit]
     profile = "mpu6500x4"       # a built-in profile or one of [profiles.NAME]
     rate_divider = 0            # output every 2**K samples of the 1 kHz base rate
-
     [filter]                    # footnav.pipeline.navigation.navigator.NavConfig (SI units, radians)
     align_s = 0.5
-    init_yaw_sigma_rad = 0.0002
-
-    [detector]                  # footnav.pipeline.stance.detectors: the dataclass of NavConfig.detector
+    [detector]                  # the dataclass of NavConfig.detector (footnav.pipeline.stance.detectors)
     threshold = 25.0
-    window_s = 0.01
-
-    [tof]                       # the ToF sensors' mounting and noise (footnav.pipeline.aiding.tof.TofConfig)
-    lever_b_m = [[0.12, 0.0, 0.03], [0.0, -0.045, 0.03], [-0.10, 0.0, 0.04]]  # from the IMU, m
-    dir_b = [[0.17, 0.0, -1.0], [0.0, 0.0, -1.0], [-0.17, 0.0, -1.0]]         # viewing directions
+    [tof]                       # the ToF sensors: TofConfig fields lever_b_m, dir_b, sigma_range_m, sigma_floor_m
     sigma_range_m = 0.01
-
     [calibration]
     dir = ""                    # calibration files (default: $FOOTNAV_CALIBRATION_DIR, else
                                 # $XDG_CONFIG_HOME/footnav/calibration, else ~/.config/footnav/calibration)
     apply = true                # apply a unit's calibration file when it connects or its capture replays
-
-    [profiles.myshoe]           # a unit profile: a built-in base plus
-    footnav.pipeline.navigation.profiles.UnitProfile fields
-    base = "mpu6500x4"
+    [profiles.myshoe]           # a unit profile: a built-in base plus UnitProfile fields
+    base = "mpu6500x4"          # (footnav.pipeline.navigation.profiles)
     gyr_bias_init_radps = 0.003
 
-Keys map one to one onto the dataclass fields named above, with the same meaning and units; an
-unknown key or a wrong type is an error naming the file, the key and what is allowed. ``[tof]``
-describes the unit's hardware (where each range sensor sits and looks, in body axes, and its noise);
-the floor-reference and gating constants of ``TofConfig`` are the algorithm's, not settings. A
-capture records the [tof] values in force, and its replay uses them.
+Keys map one to one onto the dataclass fields named above, with the same meaning and units; an unknown key or a
+wrong type is an error naming the file, the key and what is allowed. ``[tof]`` holds the unit's hardware only
+(where each range sensor sits and looks, in body axes, and its noise), not ``TofConfig``'s floor-reference and
+gating constants. A capture records the [tof] values in force, and its replay uses them.
 """
 
 from __future__ import annotations
@@ -53,7 +41,7 @@ from pathlib import Path
 from typing import Any, cast
 
 from footnav.device.files.capture import FLUSH_PERIOD_S
-from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.aiding.tof_types import TofConfig
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.navigation.navigator import NavConfig
 from footnav.pipeline.navigation.profiles import PROFILES, UnitProfile
@@ -98,10 +86,14 @@ class Setting:
 class Config:
     """The effective configuration.
 
-    Attributes:
-        values: ``section.key`` -> :class:`Setting` for session, unit, filter and detector keys.
-        profiles: every known unit profile (built-in and from the file), with its source.
-        file: the configuration file read, if any.
+    Attributes
+    ----------
+    values
+        ``section.key`` -> :class:`Setting` for session, unit, filter and detector keys.
+    profiles
+        Every known unit profile (built-in and from the file), with its source.
+    file
+        The configuration file read, if any.
     """
 
     values: dict[str, Setting]
@@ -298,8 +290,10 @@ def _apply_table(cfg: Config, data: dict[str, Any], source: str, where: str) -> 
 def load_config(path: Path | None = None, *, cwd: Path | None = None) -> Config:
     """Defaults, then ``path`` (which must exist) or else ``footnav.toml`` in ``cwd`` if there is one.
 
-    Raises:
-        ConfigError: the file cannot be read, is not TOML, or holds an unknown key or a wrong type.
+    Raises
+    ------
+    ConfigError
+        The file cannot be read, is not TOML, or holds an unknown key or a wrong type.
     """
     cfg = defaults()
     file = path if path is not None else (cwd or Path.cwd()) / DEFAULT_FILE

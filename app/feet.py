@@ -29,7 +29,7 @@ from footnav.device.errors import DeviceError
 from footnav.device.files.capture import CaptureTap, CaptureWriter, UnitHeader
 from footnav.device.links.reconnecting import LinkEvent, LinkGap, ReconnectingLink
 from footnav.device.unit import OpenShoeUnit
-from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.aiding.tof_types import TofConfig
 from footnav.pipeline.dual_imu.board_eskf import DualEskfConfig
 from footnav.pipeline.dual_imu.navigator import DualNavConfig, DualNavigator
 from footnav.pipeline.errors import FootnavError

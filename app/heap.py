@@ -5,7 +5,7 @@ sink threads, the capture's compressor thread and the event loop. glibc's alloca
 thread that contends for the heap an arena of its own (up to 8 per core) and returns freed memory
 from an arena's interior to the system only when ``malloc_trim`` walks it (glibc ≥ 2.8; ``free``
 only trims an arena's top). Over an hour the freed but unreturned pages add up, so the resident size
-creeps although Python's own heap is flat (``tracemalloc``; see the soak in the README).
+creeps although Python's own heap is flat (``tracemalloc``; ``benchmarks/soak.py``).
 
 Two remedies, both from glibc's documented interface (``mallopt(3)``, ``malloc_trim(3)``):
 ``limit_arenas`` caps the number of arenas before the session's threads start, and

@@ -30,7 +30,7 @@ from footnav.device.protocol.extensions import BaroBatch, TofBatch
 from footnav.device.protocol.raw_imu import RawImuBatch
 from footnav.device.unit import LinkStats, OpenShoeUnit
 from footnav.pipeline.aiding.baro import PressureBatch
-from footnav.pipeline.aiding.tof import RangeBatch
+from footnav.pipeline.aiding.tof_types import RangeBatch
 from footnav.pipeline.calibration.model import CalibrationError, ImuCalibration
 from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.runner import BatchNavigator, NavSink, SourceItem, run_pipeline
@@ -222,6 +222,90 @@ def _readings(batch: TofBatch | BaroBatch, t0_s: float, window: tuple[float, flo
     return PressureBatch(t_s[keep], batch.pressure_pa[keep])
 
 
+class _Window:
+    """A session's window ``(start, end)`` in session seconds (None: the whole session): samples before
+    it are decoded but not passed on, ``on_window()`` is called at the first one passed on."""
+
+    def __init__(self, bounds: tuple[float, float] | None, on_window: Callable[[], None] | None) -> None:
+        self.bounds = bounds
+        self.on_window = on_window
+        self.entered = bounds is None
+
+    def ended(self, t_first_s: float) -> bool:
+        """Whether a batch starting at ``t_first_s`` (session s) lies after the window's end."""
+        return self.bounds is not None and t_first_s > self.bounds[1]
+
+    def trim(self, batch: ImuBatch) -> ImuBatch | None:
+        """``batch`` (session time) trimmed to the window to the sample, whatever the batching (None:
+        none of it in the window)."""
+        if self.bounds is None:
+            return batch
+        start_s, end_s = self.bounds
+        if not self.entered:
+            if float(batch.t_s[-1]) < start_s:
+                return None
+            self.entered = True
+            if self.on_window is not None:
+                self.on_window()
+        keep = (batch.t_s >= start_s) & (batch.t_s <= end_s)
+        if keep.all():
+            return batch
+        return batch.select(keep) if keep.any() else None
+
+
+async def _arrivals(
+    batches: AsyncGenerator[Any, None],
+    idle_notice_s: float | None,
+    source_done: Callable[[], bool],
+    on_idle: Callable[[float], None],
+) -> AsyncGenerator[Any, None]:
+    """The stream's batches as they arrive. With ``idle_notice_s``, ``on_idle(idle_notice_s)`` each time
+    none came for that long, and the end once ``source_done()`` while idle; None (a replay): never idle,
+    and no task per batch."""
+    if idle_notice_s is None:
+        async for batch in batches:
+            yield batch
+        return
+    # The pending anext survives idle timeouts: cancelling it (asyncio.wait_for) would end the generator.
+    pending: asyncio.Future[Any] | None = None
+    try:
+        while True:
+            if pending is None:
+                pending = asyncio.ensure_future(anext(batches))
+            done, _ = await asyncio.wait({pending}, timeout=idle_notice_s)
+            if not done:
+                if source_done():
+                    return
+                on_idle(idle_notice_s)
+                continue
+            fut, pending = pending, None
+            try:
+                batch = fut.result()
+            except StopAsyncIteration:
+                return
+            yield batch
+    finally:
+        if pending is not None and not pending.done():
+            pending.cancel()
+            with contextlib.suppress(asyncio.CancelledError, StopAsyncIteration):
+                await pending
+
+
+def _on_session_clock(
+    batch: ImuBatch, result: SerialSessionResult, host_clock: Callable[[int], int] | None
+) -> ImuBatch:
+    """An IMU batch with its time rebased to the session's first sample (which the first batch sets),
+    and its host stamps mapped by ``host_clock`` (per read: a joined batch holds several)."""
+    if host_clock is not None:
+        stamps, read_of = np.unique(batch.host_ns, return_inverse=True)
+        mapped = np.array([host_clock(int(h)) for h in stamps], dtype=np.int64)
+        batch = dataclasses.replace(batch, host_ns=mapped[read_of])
+    if result.device_t0_s is None:
+        result.device_t0_s = float(batch.t_s[0])
+        result.first_counter = int(batch.counter[0])
+    return dataclasses.replace(batch, t_s=batch.t_s - result.device_t0_s)
+
+
 async def _session_samples(
     unit: OpenShoeUnit,
     result: SerialSessionResult,
@@ -246,73 +330,33 @@ async def _session_samples(
     passed on (``on_window()`` is called at the first one passed on), the stream ends after ``end``.
     Readings before the first IMU sample (no session clock yet) are dropped; ToF readings are dropped
     when not ``use_ranges``."""
-    in_window = window is None
+    span = _Window(window, on_window)
     received = 0
     batches = cast(AsyncGenerator[Any, None], _raw_batches(unit) if raw else _imu_and_readings(unit, join_samples))
-    # The pending anext survives idle timeouts: cancelling it (asyncio.wait_for) would end the generator.
-    pending: asyncio.Future[Any] | None = None
-    async with contextlib.aclosing(batches):
-        try:
-            while expect_samples is None or received < expect_samples:
-                if idle_notice_s is None:  # a replay: never idle, and no task per batch
-                    try:
-                        batch = await anext(batches)
-                    except StopAsyncIteration:
-                        return
-                else:
-                    if pending is None:
-                        pending = asyncio.ensure_future(anext(batches))
-                    done, _ = await asyncio.wait({pending}, timeout=idle_notice_s)
-                    if not done:
-                        if source_done():
-                            return
-                        on_idle(idle_notice_s)
-                        continue
-                    fut, pending = pending, None
-                    try:
-                        batch = fut.result()
-                    except StopAsyncIteration:
-                        return
-                if isinstance(batch, TofBatch | BaroBatch):
-                    if isinstance(batch, TofBatch) and not use_ranges:
-                        continue
-                    if result.device_t0_s is not None and (window is None or in_window):
-                        item = _readings(batch, result.device_t0_s, window)
-                        if item is not None:
-                            yield item
+    arrivals = _arrivals(batches, idle_notice_s, source_done, on_idle)
+    async with contextlib.aclosing(batches), contextlib.aclosing(arrivals):
+        while expect_samples is None or received < expect_samples:
+            try:
+                batch = await anext(arrivals)
+            except StopAsyncIteration:
+                return
+            if isinstance(batch, TofBatch | BaroBatch):
+                if isinstance(batch, TofBatch) and not use_ranges:
                     continue
-                if host_clock is not None:  # per read: a joined batch holds several
-                    stamps, read_of = np.unique(batch.host_ns, return_inverse=True)
-                    mapped = np.array([host_clock(int(h)) for h in stamps], dtype=np.int64)
-                    batch = dataclasses.replace(batch, host_ns=mapped[read_of])
-                if result.device_t0_s is None:
-                    result.device_t0_s = float(batch.t_s[0])
-                    result.first_counter = int(batch.counter[0])
-                if window is not None:
-                    t_first = float(batch.t_s[0]) - result.device_t0_s
-                    if t_first > window[1]:
-                        return
-                    if not in_window:
-                        if float(batch.t_s[-1]) - result.device_t0_s < window[0]:
-                            continue
-                        in_window = True
-                        if on_window is not None:
-                            on_window()
-                batch = dataclasses.replace(batch, t_s=batch.t_s - result.device_t0_s)
-                if window is not None:  # trim to the window to the sample, whatever the batching
-                    keep = (batch.t_s >= window[0]) & (batch.t_s <= window[1])
-                    if not keep.all():
-                        if not keep.any():
-                            continue
-                        batch = batch.select(keep)
-                received += len(batch)
-                result.samples_received = received
-                yield batch
-        finally:
-            if pending is not None and not pending.done():
-                pending.cancel()
-                with contextlib.suppress(asyncio.CancelledError, StopAsyncIteration):
-                    await pending
+                if result.device_t0_s is not None and span.entered:
+                    item = _readings(batch, result.device_t0_s, window)
+                    if item is not None:
+                        yield item
+                continue
+            batch = _on_session_clock(batch, result, host_clock)
+            if span.ended(float(batch.t_s[0])):
+                return
+            batch = span.trim(batch)
+            if batch is None:
+                continue
+            received += len(batch)
+            result.samples_received = received
+            yield batch
 
 
 async def _corrected(samples: AsyncIterator[Any], calibration: ImuCalibration) -> AsyncIterator[Any]:
@@ -330,7 +374,7 @@ async def _imu_and_readings(
     ``join_samples > 0``: consecutive IMU batches are joined until they hold that many samples (or
     another kind of batch, or the end, comes). For a replay at full speed, whose reads are all there
     at once: the unit still frames and orders each captured read as it did live, and everything
-    after it pays its per-batch cost once per join instead of once per read (README "Speed")."""
+    after it pays its per-batch cost once per join instead of once per read."""
     held: list[ImuBatch] = []
     held_samples = 0
     async with contextlib.aclosing(unit.batches()) as stream:

@@ -46,7 +46,8 @@ from footnav.device.emulator.motion.gait import GaitTruth, simulate_walk
 from footnav.device.emulator.sensors.imu_errors import AXIS_ERRORS, IMU_GRADES, ImuGrade, corrupt
 from footnav.pipeline.navigation import eskf
 from footnav.pipeline.navigation.alignment import align_from_still
-from footnav.pipeline.navigation.navigator import NO_CLIPPED_RATES, NavConfig, filter_start, navigate
+from footnav.pipeline.navigation.batches import NO_CLIPPED_RATES
+from footnav.pipeline.navigation.navigator import NavConfig, filter_start, navigate
 from footnav.pipeline.navigation.profiles import UnitProfile, get_profile
 from scipy.stats import chi2
 

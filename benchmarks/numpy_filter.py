@@ -35,11 +35,20 @@ _I15 = np.eye(15)
 class FilterRun:
     """Outputs of one run, shaped like ``footnav.pipeline.navigation.eskf.run_filter``'s.
 
-    Attributes:
-        pos_n_m, vel_n_mps: (n, 3); quat_nb_wxyz: (n, 4); pos_cov_n_m2: (n, 4, 4) of (x, y, z, ψ).
-        counters: (eskf.N_CNT,) the same counts as ``run_filter`` (see ``eskf.CNT_*``).
-        filter_state: (eskf.N_FILTER_STATE,) the same carried state (see ``eskf.STATE_*``).
-        x, P: the final nominal state (16,) and error covariance (15, 15).
+    Attributes
+    ----------
+    pos_n_m, vel_n_mps
+        (n, 3).
+    quat_nb_wxyz
+        (n, 4).
+    pos_cov_n_m2
+        (n, 4, 4) of (x, y, z, ψ).
+    counters
+        (eskf.N_CNT,) the same counts as ``run_filter`` (see ``eskf.CNT_*``).
+    filter_state
+        (eskf.N_FILTER_STATE,) the same carried state (see ``eskf.STATE_*``).
+    x, P
+        the final nominal state (16,) and error covariance (15, 15).
     """
 
     pos_n_m: F64

@@ -28,14 +28,8 @@ from footnav.device.emulator.motion.gait import simulate_walk
 from footnav.device.emulator.sensors.imu_errors import corrupt
 from footnav.pipeline.navigation import eskf
 from footnav.pipeline.navigation.alignment import align_from_still
-from footnav.pipeline.navigation.navigator import (
-    NO_CLIPPED_RATES,
-    NavConfig,
-    Navigator,
-    filter_start,
-    navigate,
-    zupt_ratio,
-)
+from footnav.pipeline.navigation.batches import NO_CLIPPED_RATES, zupt_ratio
+from footnav.pipeline.navigation.navigator import NavConfig, Navigator, filter_start, navigate
 from footnav.pipeline.samples import ImuBatch
 from footnav.pipeline.smoothing.stepwise import StepSmoothingNavigator
 from footnav.pipeline.stance.detectors import StreamingDetector

@@ -163,8 +163,10 @@ def _comports() -> list[ListPortInfo]:
 async def ble_candidates(timeout_s: float, backend: BleBackend | None = None) -> list[BleCandidate]:
     """Scan for ``timeout_s`` and return the devices that look like shoe units, strongest first.
 
-    Raises:
-        DeviceError: no Bluetooth stack (one-line message), or the scan failed.
+    Raises
+    ------
+    DeviceError
+        no Bluetooth stack (one-line message), or the scan failed.
     """
     from bleak import BleakScanner
     from bleak.exc import BleakError
@@ -195,14 +197,18 @@ async def scan(
 ) -> ScanReport:
     """Serial ports and BLE devices that look like shoe units (``footnav scan``).
 
-    Args:
-        timeout_s: how long to scan BLE.
-        ble_backend: bleak backend classes (None: the platform's).
-        list_ports: returns the serial ports (default ``serial.tools.list_ports.comports``); the seam
-            for tests.
-        ble: False skips the BLE scan.
-
     Never raises for a missing Bluetooth stack: :attr:`ScanReport.ble_error` says so in one line.
+
+    Parameters
+    ----------
+    timeout_s
+        how long to scan BLE.
+    ble_backend
+        bleak backend classes (None: the platform's).
+    list_ports
+        returns the serial ports (default ``serial.tools.list_ports.comports``); the seam for tests.
+    ble
+        False skips the BLE scan.
     """
     from footnav.device.errors import DeviceError
 

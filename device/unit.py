@@ -125,8 +125,7 @@ class OpenShoeUnit:
     read_interval_s
         at most one read of the link per this interval. At 1 kHz a read holds about
         one packet; coalescing reads (10 ms in live sessions: ten packets a read) cuts the
-        per-batch cost several-fold for at most that much added latency (README "Speed": two
-        feet at 1 kHz 41 % of a core at 5 ms, 22 % at 10 ms, latency p95 9 and 13 ms). Only
+        per-batch cost several-fold for at most that much added latency. Only
         applies while caught up (reads under ``_COALESCE_BELOW_BYTES``); 0 reads as soon as
         bytes arrive.
     """

@@ -48,10 +48,14 @@ def armse_2d_pyshoe(est_pos_m: F64, gt_pos_m: F64) -> float:
 class AteResult:
     """Absolute trajectory error after the best yaw + translation alignment.
 
-    Attributes:
-        rmse_2d_m, rmse_3d_m: RMSE of horizontal and 3D position error.
-        yaw_rad: the rotation applied to the estimate.
-        mirrored: the estimate fitted better after mirroring y (a handedness mismatch).
+    Attributes
+    ----------
+    rmse_2d_m, rmse_3d_m
+        RMSE of horizontal and 3D position error.
+    yaw_rad
+        the rotation applied to the estimate.
+    mirrored
+        the estimate fitted better after mirroring y (a handedness mismatch).
     """
 
     rmse_2d_m: float

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     from footnav.pipeline.aiding.baro import PressureAltitude
-    from footnav.pipeline.aiding.tof import RangeOutputs
+    from footnav.pipeline.aiding.tof_types import RangeOutputs
     from footnav.pipeline.gait.clearance import StrideClearance
 
 F64 = NDArray[np.float64]

@@ -19,7 +19,7 @@ from collections.abc import AsyncIterator, Callable, Sequence
 from typing import Any, Protocol, TypeVar, cast
 
 from footnav.pipeline.aiding.baro import PressureBatch
-from footnav.pipeline.aiding.tof import RangeBatch
+from footnav.pipeline.aiding.tof_types import RangeBatch
 from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.samples import ImuBatch
 

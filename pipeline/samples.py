@@ -27,15 +27,21 @@ def diff_after(previous: float, values: _Steps) -> _Steps:
 class ImuBatch:
     """A run of IMU samples in the unit's body frame.
 
-    Attributes:
-        t_s: (n,) device time in seconds, unwrapped from the unit's tick counter, increasing.
-        acc_b_mps2: (n, 3) specific force in the body frame, m/s².
-        gyr_b_radps: (n, 3) angular rate in the body frame, rad/s.
-        counter: (n,) packet counter as sent by the unit (for gap accounting).
-        host_ns: (n,) host receive time, ``time.monotonic_ns()`` of the read that completed the packet.
-        gyr_clipped_b: (n, 3) which rates were cut off at the sensor's range (reconstructed where they
-            could be), or None (not known: live streams; found in whole recordings by
-            ``footnav.pipeline.navigation.saturation``).
+    Attributes
+    ----------
+    t_s
+        (n,) device time in seconds, unwrapped from the unit's tick counter, increasing.
+    acc_b_mps2
+        (n, 3) specific force in the body frame, m/s².
+    gyr_b_radps
+        (n, 3) angular rate in the body frame, rad/s.
+    counter
+        (n,) packet counter as sent by the unit (for gap accounting).
+    host_ns
+        (n,) host receive time, ``time.monotonic_ns()`` of the read that completed the packet.
+    gyr_clipped_b
+        (n, 3) which rates were cut off at the sensor's range (reconstructed where they could be), or None (not known:
+        live streams; found in whole recordings by ``footnav.pipeline.navigation.saturation``).
     """
 
     t_s: F64

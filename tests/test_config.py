@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 from footnav.app.config import CLI, ConfigError, apply_capture_settings, defaults, load_config
-from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.aiding.tof_types import TofConfig
 from footnav.pipeline.navigation.navigator import NavConfig
 from footnav.pipeline.navigation.profiles import PROFILES
 

@@ -212,9 +212,8 @@ def test_footnav_dual_integrates_a_corrupt_time_stamp_gap_as_dt_max() -> None:
 @pytest.mark.parametrize(("ratio", "applied"), [(0.9, False), (0.1, True)])
 def test_dual_filter_skips_an_unsure_stance_of_a_moving_foot(ratio: float, applied: bool) -> None:
     """The dual-IMU filter has the single-IMU filter's gate (``footnav.pipeline.navigation.eskf``): an unsure
-    stance sample
-    while the filter knows the board moves at 1.9 m/s is skipped, with the stance's other updates, and
-    flagged (its stance then gives no floor level); a sure one is applied."""
+    stance sample while the filter knows the board moves at 1.9 m/s is skipped, with the stance's other
+    updates, and flagged (its stance then gives no floor level); a sure one is applied."""
     from footnav.pipeline.dual_imu.board_eskf import AUX_LAST_REJECTED, DualEskfConfig, DualEskfStream
 
     rate = 1000.0
@@ -230,3 +229,18 @@ def test_dual_filter_skips_an_unsure_stance_of_a_moving_foot(ratio: float, appli
     assert track.counters["zero_velocity_updates"] == (1 if applied else 0)
     assert stream.aux[AUX_LAST_REJECTED] == (0.0 if applied else 1.0)
     assert (stream.x[3] < 1.0) if applied else (stream.x[3] == pytest.approx(1.9, abs=1e-3))
+
+
+def test_both_filters_parameters_are_named_floats() -> None:
+    """The kernels read their parameters by name from a named tuple of floats (one numba type for all)."""
+    from footnav.pipeline.dual_imu.board_eskf import dual_parameters
+    from footnav.pipeline.dual_imu.chen2022 import PaperConfig, paper_parameters
+
+    profile = get_profile("generic")
+    dual = dual_parameters(profile, 1000.0, 9.81)
+    paper = paper_parameters(PaperConfig(profile=profile), 1000.0, 9.81)
+    for par in (dual, paper):
+        assert all(type(v) is float and math.isfinite(v) for v in par)
+    assert dual.g == paper.g == 9.81
+    assert dual.sig_acc_both < dual.sig_acc_one  # the two IMUs' mean is less noisy than one
+    assert paper.rel_pos == PaperConfig().sigma_rel_pos_m

@@ -16,7 +16,7 @@ from footnav.device.emulator.sensors.dual_imu import DEFAULT_LEVER_B_M, simulate
 from footnav.device.protocol.raw_imu import RawImuBatch
 from footnav.pipeline.dual_imu.board_eskf import run_dual_eskf
 from footnav.pipeline.dual_imu.navigator import DualNavConfig, DualNavigator
-from footnav.pipeline.navigation.navigator import zupt_ratio
+from footnav.pipeline.navigation.batches import zupt_ratio
 from footnav.pipeline.stance.detectors import DetectorParams, StreamingDetector
 from footnav.views.paths import TIMELINE, DualPaths, FootPaths
 from rerun.chunk import RrdReader

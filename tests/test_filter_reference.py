@@ -16,7 +16,8 @@ from footnav.device.emulator.motion.gait import simulate_walk
 from footnav.device.emulator.sensors.imu_errors import corrupt
 from footnav.pipeline.navigation import eskf
 from footnav.pipeline.navigation.alignment import align_from_still
-from footnav.pipeline.navigation.navigator import filter_parameters, zupt_ratio
+from footnav.pipeline.navigation.batches import zupt_ratio
+from footnav.pipeline.navigation.navigator import filter_parameters
 from footnav.pipeline.navigation.profiles import get_profile
 from footnav.pipeline.navigation.saturation import clipped_rate_variance
 from footnav.pipeline.stance.detectors import DetectorParams, StreamingDetector

@@ -9,7 +9,8 @@ import pytest
 from footnav.pipeline.errors import InputFormatError
 from footnav.pipeline.navigation import eskf
 from footnav.pipeline.navigation.alignment import align_from_still
-from footnav.pipeline.navigation.navigator import NO_CLIPPED_RATES, NavConfig, navigate
+from footnav.pipeline.navigation.batches import NO_CLIPPED_RATES
+from footnav.pipeline.navigation.navigator import NavConfig, navigate
 from footnav.pipeline.navigation.quaternion import quat_from_euler_zyx, quat_to_mat, yaw_of
 
 RATE_HZ = 1000.0

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from footnav.app.experiments import tof as exp
-from footnav.pipeline.aiding.tof import DEFAULT_DIR_B, DEFAULT_LEVER_B_M, TofConfig
+from footnav.pipeline.aiding.tof_types import DEFAULT_DIR_B, DEFAULT_LEVER_B_M, TofConfig
 from footnav.pipeline.navigation.navigator import navigate
 from footnav.pipeline.stance.height_detector import HeightDetectorParams, HeightStanceDetector
 

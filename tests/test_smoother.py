@@ -10,7 +10,8 @@ import pytest
 from footnav.device.emulator.motion.gait import simulate_walk
 from footnav.device.emulator.sensors.imu_errors import corrupt
 from footnav.pipeline.navigation import eskf
-from footnav.pipeline.navigation.navigator import NO_CLIPPED_RATES, NavConfig, Navigator, navigate, zupt_ratio
+from footnav.pipeline.navigation.batches import NO_CLIPPED_RATES, zupt_ratio
+from footnav.pipeline.navigation.navigator import NavConfig, Navigator, navigate
 from footnav.pipeline.navigation.profiles import get_profile
 from footnav.pipeline.navigation.quaternion import quat_from_euler_zyx, quat_to_mat
 from footnav.pipeline.navigation.saturation import clipped_rate_variance

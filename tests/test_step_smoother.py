@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from footnav.device.emulator.motion.gait import simulate_walk
 from footnav.device.emulator.sensors.imu_errors import corrupt
-from footnav.pipeline.aiding.tof import RangeBatch
+from footnav.pipeline.aiding.tof_types import RangeBatch
 from footnav.pipeline.nav_types import NavBatch, SmoothedSpan
 from footnav.pipeline.navigation.navigator import NavConfig, navigate
 from footnav.pipeline.navigation.profiles import get_profile

@@ -13,7 +13,7 @@ from footnav.app.commands.demo import DemoOptions, demo_truth, run_demo
 from footnav.app.commands.export import CLEARANCE_COLUMNS, EXPORT_COLUMNS, run_export
 from footnav.app.commands.replay import ReplayOptions, run_replay
 from footnav.app.config import defaults, load_config
-from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.aiding.tof_types import TofConfig
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.gait.tof_clearance import swing_clearance
 from footnav.pipeline.nav_types import NavBatch, concat_batches

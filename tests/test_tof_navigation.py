@@ -11,7 +11,8 @@ import pytest
 from footnav.app.experiments import tof as exp
 from footnav.device.emulator.motion.floors import floor_of
 from footnav.device.emulator.sensors.tof import TofSensorModel
-from footnav.pipeline.aiding.tof import LEVEL_STATES, RangeBatch, RangeOutputs, TofAiding, TofConfig
+from footnav.pipeline.aiding.tof import LEVEL_STATES, TofAiding
+from footnav.pipeline.aiding.tof_types import RangeBatch, RangeOutputs, TofConfig
 from footnav.pipeline.gait.tof_clearance import SwingClearanceTracker, swing_clearance
 from footnav.pipeline.navigation.navigator import NavConfig, Navigator, navigate
 from footnav.pipeline.navigation.profiles import get_profile

@@ -55,14 +55,8 @@ def test_jacobian_matches_finite_differences(seed: int) -> None:
     assert np.any(np.abs(H[6:9]) > 1e-3)  # the attitude part is really exercised
 
 
-def _par(gate: float = 1e9, step: float = 1e9, below: float = 1e9) -> np.ndarray:
-    par = np.zeros(tu.N_PAR)
-    par[tu.PAR_SIGMA_RANGE] = 0.01
-    par[tu.PAR_SIGMA_FLOOR] = 0.003
-    par[tu.PAR_GATE] = gate
-    par[tu.PAR_STEP] = step
-    par[tu.PAR_BELOW] = below
-    return par
+def _par(gate: float = 1e9, step: float = 1e9, below: float = 1e9) -> tu.TofParams:
+    return tu.TofParams(sigma_range=0.01, sigma_floor=0.003, gate=gate, step=step, below=below)
 
 
 @pytest.mark.parametrize("levels", [0, 2])

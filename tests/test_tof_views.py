@@ -12,7 +12,7 @@ from footnav.app.experiments import tof as exp
 from footnav.app.feet import FOOT_START_OFFSET_M, offset_sink
 from footnav.device.emulator.scripts import baro_from_height
 from footnav.pipeline.aiding.baro import PressureBatch
-from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.aiding.tof_types import TofConfig
 from footnav.pipeline.gait.events import GaitEventTracker
 from footnav.pipeline.gait.tof_clearance import swing_clearance
 from footnav.pipeline.nav_types import NavBatch, concat_batches

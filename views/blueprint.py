@@ -97,11 +97,15 @@ def build_blueprint(
 ) -> rrb.Blueprint:
     """The default blueprint for a session with the given feet.
 
-    Args:
-        feet: foot names (see :class:`footnav.views.paths.FootPaths`); the camera frames the whole scene.
-        plot_window_s: width of the scrolling clearance/stance window, s.
-        dual_runs: dual-IMU boards in the session (:class:`footnav.views.paths.DualPaths`): their IMU tracks
-            are drawn as trails and their constraint residuals get a plot of their own.
+    Parameters
+    ----------
+    feet
+        foot names (see :class:`footnav.views.paths.FootPaths`); the camera frames the whole scene.
+    plot_window_s
+        width of the scrolling clearance/stance window, s.
+    dual_runs
+        dual-IMU boards in the session (:class:`footnav.views.paths.DualPaths`): their IMU tracks are drawn as trails
+        and their constraint residuals get a plot of their own.
     """
     paths = [FootPaths(f) for f in feet]
     overrides: dict[str, list[rrb.VisibleTimeRanges | rr.Points3D]] = {}

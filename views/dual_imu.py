@@ -39,12 +39,18 @@ METHOD_COLORS: dict[str, tuple[int, int, int]] = {
 class DualRunView:
     """What is shown of one dual-IMU run.
 
-    Attributes:
-        t_s: (n,) sample times, s.
-        truth_n_m: (n, 3) IMU 1's true position, m, or None (a live session logs truth its own way).
-        tracks_n_m: method -> (n, 3) IMU 1's position as the method estimates it (NaN rows skipped).
-        imu_tracks_n_m: IMU name -> (n, 3) that IMU's own track.
-        residuals: residual name (with its unit) -> (n, 3) values, NaN where not formed.
+    Attributes
+    ----------
+    t_s
+        (n,) sample times, s.
+    truth_n_m
+        (n, 3) IMU 1's true position, m, or None (a live session logs truth its own way).
+    tracks_n_m
+        method -> (n, 3) IMU 1's position as the method estimates it (NaN rows skipped).
+    imu_tracks_n_m
+        IMU name -> (n, 3) that IMU's own track.
+    residuals
+        residual name (with its unit) -> (n, 3) values, NaN where not formed.
     """
 
     t_s: F64

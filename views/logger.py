@@ -385,18 +385,11 @@ class RerunLogger:
                 links.append(item)
                 if len(links) >= 64:
                     self._guarded(self._send_links, links)
-            elif isinstance(item, _Dual):
-                self._guarded(self._send_dual, item)
-                continue
-            elif isinstance(item, _Truth):
-                self._flush(pending, events)  # keep the order: truth after earlier nav
-                n_pending, deadline = 0, None
-                self._guarded(self._send_truth, item)
-                continue
-            elif isinstance(item, _SwingRest):
-                self._flush(pending, events)  # after the foot's earlier batches
-                n_pending, deadline = 0, None
-                self._guarded(self._send_swing_rest, item)
+            elif isinstance(item, _Dual | _Truth | _SwingRest):
+                if not isinstance(item, _Dual):  # after the earlier batches
+                    self._flush(pending, events)
+                    n_pending, deadline = 0, None
+                self._send_apart(item)
                 continue
             stop = item is _STOP
             if deadline is None and item is not None and not stop:
@@ -410,6 +403,15 @@ class RerunLogger:
                 break
         self._guarded(self._send_lines, True)
         self._guarded(self._finish)
+
+    def _send_apart(self, item: _Dual | _Truth | _SwingRest) -> None:
+        """The items sent as they come, not held for the next flush."""
+        if isinstance(item, _Dual):
+            self._guarded(self._send_dual, item)
+        elif isinstance(item, _Truth):
+            self._guarded(self._send_truth, item)
+        else:
+            self._guarded(self._send_swing_rest, item)
 
     def _discard_until_stop(self) -> None:
         while (item := self._queue.get()) is not _STOP:

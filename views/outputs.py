@@ -43,12 +43,18 @@ DEAD_LOGGER_CLOSE_S = 0.5
 class Output:
     """One destination of the recording.
 
-    Attributes:
-        kind: ``viewer``, ``web`` or ``file``.
-        description: for messages (URL, pid or path).
-        logger: its logger thread.
-        process: the viewer or web server process footnav started, if any (watched for exit).
-        path: the .rrd file, for ``file`` outputs.
+    Attributes
+    ----------
+    kind
+        ``viewer``, ``web`` or ``file``.
+    description
+        for messages (URL, pid or path).
+    logger
+        its logger thread.
+    process
+        the viewer or web server process footnav started, if any (watched for exit).
+    path
+        the .rrd file, for ``file`` outputs.
     """
 
     kind: str
@@ -62,9 +68,12 @@ class Output:
 class SessionViews:
     """Fan-out of one session's estimates to every :class:`Output`; the same calls as RerunLogger.
 
-    Args:
-        outputs: at least one.
-        notice: where one-line notices go (a viewer that died, ...).
+    Parameters
+    ----------
+    outputs
+        at least one.
+    notice
+        where one-line notices go (a viewer that died, ...).
     """
 
     def __init__(self, outputs: Sequence[Output], *, notice: Callable[[str], None]) -> None:
@@ -190,8 +199,12 @@ def open_session_views(
     - a viewer wanted but none could start (no display, start-up failure): save to a default file;
     - ``save``: always also that file. A path that cannot be written is reported and skipped.
 
-    Returns:
-        ``(views, notes)``; ``views`` is None when there is no output at all.
+    Returns
+    -------
+    views : SessionViews | None
+        None when there is no output at all.
+    notes : list[str]
+        The notes describing the outputs (the web viewer's URL is in them).
     """
     outputs: list[Output] = []
     notes: list[str] = []

@@ -52,8 +52,10 @@ DEFAULT_FOOT = "foot"
 class FootPaths:
     """Entity paths of one foot.
 
-    Attributes:
-        foot: name used in every path, e.g. ``"foot"``, ``"left"``, ``"right"``.
+    Attributes
+    ----------
+    foot
+        name used in every path, e.g. ``"foot"``, ``"left"``, ``"right"``.
     """
 
     foot: str = DEFAULT_FOOT

@@ -46,8 +46,10 @@ def has_display(environ: Mapping[str, str] | None = None) -> bool:
 def viewer_binary() -> Path:
     """Path of the viewer executable shipped in the rerun-sdk wheel (``rerun_cli/rerun``).
 
-    Raises:
-        ViewerStartError: the wheel has no viewer binary.
+    Raises
+    ------
+    ViewerStartError
+        the wheel has no viewer binary.
     """
     import rerun_cli
 
@@ -84,11 +86,17 @@ def spawn_viewer(
     The viewer runs in its own session so it outlives footnav (the user closes it). ``env`` replaces
     the viewer's environment (default: inherited).
 
-    Returns:
-        The ``rerun+http://127.0.0.1:PORT/proxy`` URL for ``rr.GrpcSink``, and the process.
+    Returns
+    -------
+    url : str
+        The ``rerun+http://127.0.0.1:PORT/proxy`` URL for ``rr.GrpcSink``.
+    process : subprocess.Popen[bytes]
+        The viewer's process.
 
-    Raises:
-        ViewerStartError: the viewer exited or did not open its port in time.
+    Raises
+    ------
+    ViewerStartError
+        the viewer exited or did not open its port in time.
     """
     port = _free_loopback_port()
     cmd = [
@@ -153,11 +161,19 @@ def serve_web_viewer(
     The server runs in its own session and outlives footnav so the page keeps working; it buffers
     at most ``server_memory_limit`` for late browsers.
 
-    Returns:
-        ``(grpc_url for rr.GrpcSink, page URL to open in a browser, process)``.
+    Returns
+    -------
+    grpc_url : str
+        For ``rr.GrpcSink``.
+    page_url : str
+        The page URL to open in a browser.
+    process : subprocess.Popen[bytes]
+        The server's process.
 
-    Raises:
-        ViewerStartError: it exited or did not open its ports in time.
+    Raises
+    ------
+    ViewerStartError
+        it exited or did not open its ports in time.
     """
     grpc_port = _free_loopback_port()
     web_port = web_port or _free_loopback_port()

@@ -29,8 +29,9 @@ from footnav.app.config import Config
 from footnav.app.feet import new_session_id, open_capture
 from footnav.app.session import UnitAddress, open_unit_link
 from footnav.device.emulator.sensors.icosahedron import MISCALIBRATED_MCU_ID as DEMO_MCU_ID
-from footnav.device.files.capture import CaptureReplayLink, CaptureWriter, UnitHeader, read_capture_info
+from footnav.device.files.capture import CaptureWriter, UnitHeader, read_capture_info
 from footnav.device.links.base import ByteLink
+from footnav.device.links.replay import CaptureReplayLink
 from footnav.device.modes import RawImuMode
 from footnav.device.protocol import raw_imu
 from footnav.device.unit import Batch, OpenShoeUnit

@@ -54,7 +54,7 @@ from footnav.device.emulator.sensors.tof import TofMount, TofSensorModel, tof_re
 from footnav.device.emulator.serving.pty import PtyShoeServer
 from footnav.device.modes import RawImuMode
 from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
-from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.aiding.tof_types import TofConfig
 from footnav.pipeline.dual_imu.lever_arm import check_lever_arm
 from footnav.pipeline.dual_imu.navigator import DualNavigator
 from footnav.pipeline.navigation.navigator import Navigator
@@ -202,8 +202,8 @@ def demo_extensions(
     return tof, baro_from_height(truth.t_s, truth.pos_n_m[:, 2])
 
 
-def run_demo(opts: DemoOptions) -> int:
-    """Run the demo; returns the process exit code."""
+def check_options(opts: DemoOptions) -> None:
+    """Refuse combinations the emulator cannot serve (``ValueError``)."""
     if opts.path not in PATHS:
         raise ValueError(f"unknown path {opts.path!r}; choose one of {', '.join(PATHS)}")
     if opts.feet not in (1, 2):
@@ -212,6 +212,36 @@ def run_demo(opts: DemoOptions) -> int:
         raise ValueError("the dual-IMU demo emulates one shoe")
     if opts.miscalibrated and opts.axes != "none":
         raise ValueError("the miscalibrated unit has its own scale and misalignment errors; drop --axis-errors")
+
+
+def emulated_servers(
+    opts: DemoOptions, truths: list[tuple[GaitTruth, NDArray[np.float64], NDArray[np.float64]]], cfg: Config
+) -> list[PtyShoeServer]:
+    """One pseudo-terminal shoe per foot, serving its corrupted signals (and ToF and barometer with ``tof``)."""
+    if opts.dual_imu:
+        t_dual, acc_dual, gyr_dual = truths[0]
+        return [
+            PtyShoeServer(
+                t_dual.t_s,
+                acc_dual[:, 0],
+                gyr_dual[:, 0],
+                speed=opts.realtime,
+                record=False,
+                imu_acc_b_mps2=acc_dual,
+                imu_gyr_b_radps=gyr_dual,
+            )
+        ]
+    mcu_id = MISCALIBRATED_MCU_ID if opts.miscalibrated else None
+    ext = [demo_extensions(opts, t, k, cfg.tof_config(opts.stance)) for k, (t, _, _) in enumerate(truths)]
+    return [
+        PtyShoeServer(t.t_s, acc, gyr, speed=opts.realtime, record=False, mcu_id=mcu_id, tof=tof, baro=baro)
+        for (t, acc, gyr), (tof, baro) in zip(truths, ext, strict=True)
+    ]
+
+
+def run_demo(opts: DemoOptions) -> int:
+    """Run the demo; returns the process exit code."""
+    check_options(opts)
     feet = ("foot",) if opts.feet == 1 else ("left", "right")
     truths = [dual_demo_truth(opts)] if opts.dual_imu else [demo_truth(opts, k) for k in range(len(feet))]
     truth = truths[0][0]
@@ -246,26 +276,7 @@ def run_demo(opts: DemoOptions) -> int:
         views.log_event(
             f"demo: {opts.path}, {opts.duration_s:.0f} s, grade {opts.grade}, feet {', '.join(feet)}", t_s=0.0
         )
-    if opts.dual_imu:
-        t_dual, acc_dual, gyr_dual = truths[0]
-        servers = [
-            PtyShoeServer(
-                t_dual.t_s,
-                acc_dual[:, 0],
-                gyr_dual[:, 0],
-                speed=opts.realtime,
-                record=False,
-                imu_acc_b_mps2=acc_dual,
-                imu_gyr_b_radps=gyr_dual,
-            )
-        ]
-    else:
-        mcu_id = MISCALIBRATED_MCU_ID if opts.miscalibrated else None
-        ext = [demo_extensions(opts, t, k, cfg.tof_config(opts.stance)) for k, (t, _, _) in enumerate(truths)]
-        servers = [
-            PtyShoeServer(t.t_s, acc, gyr, speed=opts.realtime, record=False, mcu_id=mcu_id, tof=tof, baro=baro)
-            for (t, acc, gyr), (tof, baro) in zip(truths, ext, strict=True)
-        ]
+    servers = emulated_servers(opts, truths, cfg)
     extra = {"command": "footnav demo", "emulator": f"{opts.path} {opts.grade} axes {opts.axes}"}
     capture = open_capture(cfg, session_id, enabled=opts.capture, extra=extra)
     status = StatusLine(feet=feet)
@@ -334,6 +345,17 @@ def run_demo(opts: DemoOptions) -> int:
                 notice(note)
     if interrupted:
         print("interrupted: stopped the unit and closed the recording", file=sys.stderr)
+    return print_summaries(opts, runs, truths, lever)
+
+
+def print_summaries(
+    opts: DemoOptions,
+    runs: list[FootRun],
+    truths: list[tuple[GaitTruth, NDArray[np.float64], NDArray[np.float64]]],
+    lever: tuple[float, float, float],
+) -> int:
+    """Each foot's summary against the ground truth; 1 if a foot never navigated, else 0."""
+    two = len(runs) > 1
     code = 0
     for run, (t, _, _) in zip(runs, truths, strict=True):
         summary = summarise(t, run.result, run.navigator.stats.samples_out)

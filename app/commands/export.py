@@ -16,7 +16,7 @@ import numpy as np
 from footnav.app.status import input_handling
 from footnav.device.files.capture import MCAP_MAGIC
 from footnav.device.files.recordings import CsvMapping, Recording, load_recording
-from footnav.pipeline.aiding.tof import TofConfig
+from footnav.pipeline.aiding.tof_types import TofConfig
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.gait.steps import segment_steps
 from footnav.pipeline.gait.tof_clearance import swing_clearance

@@ -25,7 +25,13 @@ from footnav.app.config import Config, apply_capture_settings
 from footnav.app.feet import FootRun, dual_view_sink, foot_run, foot_sinks, notice
 from footnav.app.session import CalibrationLookup, run_unit_session
 from footnav.app.status import Progress, StatusLine, input_handling
-from footnav.device.files.capture import EXPECTED, MCAP_MAGIC, CaptureReplayLink, summarize_capture
+from footnav.device.files.capture import (
+    EXPECTED,
+    MCAP_MAGIC,
+    CaptureSummary,
+    summarize_capture,
+)
+from footnav.device.links.replay import CaptureReplayLink
 from footnav.device.modes import RawImuMode
 from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
 from footnav.device.unit import OpenShoeUnit
@@ -36,7 +42,7 @@ from footnav.views.outputs import open_session_views
 
 FULL_SPEED_JOIN_SAMPLES = 1000
 """A replay at full speed passes the IMU samples on in batches of about this many (a captured read
-holds about 30 at 1 kHz): the same estimates, a fraction of the per-batch cost (README "Speed")."""
+holds about 30 at 1 kHz): the same estimates, a fraction of the per-batch cost."""
 REPLAY_PUT_TIMEOUT_S = 60.0
 """Faster than real time, the pipeline waits for the Rerun loggers rather than dropping samples."""
 
@@ -104,13 +110,13 @@ class ReplayOptions:
     stance: str | None = None
 
 
-def run_replay(opts: ReplayOptions) -> int:
-    """Replay a capture; returns the exit code.
+def checked_summary(opts: ReplayOptions) -> CaptureSummary:
+    """The capture's summary, once it is known to hold a navigation session to replay.
 
     Raises
     ------
     InputFormatError
-        the file is not a footnav capture.
+        the file is not a footnav capture, declares no unit, holds no data, or is a calibration.
     """
     detect_format(opts.path)
     summary = summarize_capture(opts.path)
@@ -132,6 +138,37 @@ def run_replay(opts: ReplayOptions) -> int:
         )
     elif summary.truncated:
         notice(f"{opts.path} ends mid-record (the writer was killed or the disk was full): replaying what is there")
+    return summary
+
+
+def capture_calibration_lookup(summary: CaptureSummary, cfg: Config, foot: str) -> CalibrationLookup | None:
+    """The live session asked the unit its MCU id (an ``mcu_id`` event): ask again, from the capture."""
+    if not any(e.get("event") == "mcu_id" for e in summary.events.get(foot, [])):
+        return None
+    folder = calibration_dir(cfg)
+    apply = bool(cfg["calibration.apply"])
+    prefix = f"{foot}: " if len(summary.info.feet) > 1 else ""
+
+    def find(mcu_id: bytes) -> StoredCalibration | None:
+        return load_calibration(folder, mcu_id) if apply else None
+
+    def report(mcu_id: bytes | None, stored: StoredCalibration | None, note: str) -> None:
+        if apply:
+            notice(prefix + note)
+
+    return CalibrationLookup(find=find, report=report)
+
+
+def run_replay(opts: ReplayOptions) -> int:
+    """Replay a capture; returns the exit code.
+
+    Raises
+    ------
+    InputFormatError
+        the file is not a footnav capture.
+    """
+    summary = checked_summary(opts)
+    info = summary.info
     cfg = opts.config
     feet = info.feet
     for unit in info.units:
@@ -203,23 +240,6 @@ def run_replay(opts: ReplayOptions) -> int:
         for foot, events in summary.events.items()
     }
 
-    def lookup(foot: str) -> CalibrationLookup | None:
-        """The live session asked the unit its MCU id (an ``mcu_id`` event): ask again, from the capture."""
-        if not any(e.get("event") == "mcu_id" for e in summary.events.get(foot, [])):
-            return None
-        folder = calibration_dir(cfg)
-        apply = bool(cfg["calibration.apply"])
-        prefix = f"{foot}: " if len(feet) > 1 else ""
-
-        def find(mcu_id: bytes) -> StoredCalibration | None:
-            return load_calibration(folder, mcu_id) if apply else None
-
-        def report(mcu_id: bytes | None, stored: StoredCalibration | None, note: str) -> None:
-            if apply:
-                notice(prefix + note)
-
-        return CalibrationLookup(find=find, report=report)
-
     async def session(run: FootRun) -> None:
         link = links[run.foot]
         unit = OpenShoeUnit(link)
@@ -241,7 +261,7 @@ def run_replay(opts: ReplayOptions) -> int:
             idle_notice_s=None,
             window=(opts.start_s, opts.end_s) if windowed else None,
             on_window=lambda: setattr(link, "paced", True),
-            calibration=lookup(run.foot),
+            calibration=capture_calibration_lookup(summary, cfg, run.foot),
             extensions=bool(settings.get("extensions", False)),
             use_ranges=opts.tof,
             join_samples=FULL_SPEED_JOIN_SAMPLES if math.isinf(opts.speed) else 0,
@@ -266,6 +286,18 @@ def run_replay(opts: ReplayOptions) -> int:
                 notice(note)
     if interrupted:
         print("interrupted: the recording was closed", file=sys.stderr)
+    print_results(opts, summary, runs, links, status)
+    return 0
+
+
+def print_results(
+    opts: ReplayOptions,
+    summary: CaptureSummary,
+    runs: list[FootRun],
+    links: dict[str, CaptureReplayLink],
+    status: StatusLine,
+) -> None:
+    """Corruption the replay found itself, and each foot's samples and distance."""
     corrupt = [link.state.corrupt_at for link in links.values() if link.state.corrupt_at is not None]
     if corrupt and summary.corrupt_at is None:  # found by the replay itself (the index looked whole)
         notice(
@@ -281,4 +313,3 @@ def run_replay(opts: ReplayOptions) -> int:
             f"(lost packets: {lost}); distance {status.foot(run.foot).distance_m:.2f} m"
             + (f"; {handled}" if (handled := input_handling(st)) else "")
         )
-    return 0

@@ -34,9 +34,6 @@ from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.navigation.navigator import NavConfig, navigate
 from numpy.typing import NDArray
 
-NAME = "calibration"
-HELP = "icosahedron calibration of an emulated miscalibrated unit: parameters vs truth, walk with/without"
-
 F64 = NDArray[np.float64]
 RATE_HZ = 1000.0
 
@@ -51,8 +48,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def calibrate_emulated(errors: Miscalibration, *, grade: str, seed: int) -> tuple[ImuCalibration, tuple[float, float]]:
     """Run the procedure on the emulated unit (samples fed in 50 ms reads): the fit and the temperature range.
 
-    Raises:
-        CalibrationError: the faces did not determine the calibration.
+    Raises
+    ------
+    CalibrationError
+        the faces did not determine the calibration.
     """
     truth = simulate_icosahedron(RATE_HZ)
     temp = warm_up_c(truth.t_s)

@@ -39,7 +39,8 @@ from footnav.pipeline.dual_imu.board_eskf import DualEskfConfig, DualEskfTrack, 
 from footnav.pipeline.dual_imu.chen2022 import DualTrack, PaperConfig, run_paper
 from footnav.pipeline.navigation import eskf
 from footnav.pipeline.navigation.alignment import align_from_still
-from footnav.pipeline.navigation.navigator import NO_CLIPPED_RATES, NavConfig, filter_parameters, navigate, zupt_ratio
+from footnav.pipeline.navigation.batches import NO_CLIPPED_RATES, zupt_ratio
+from footnav.pipeline.navigation.navigator import NavConfig, filter_parameters, navigate
 from footnav.pipeline.navigation.profiles import UnitProfile, get_profile
 from footnav.pipeline.stance.detectors import StreamingDetector
 from footnav.views.dual_imu import DualRunView, save_dual_runs
@@ -47,8 +48,6 @@ from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]
 
-NAME = "dual-imu"
-HELP = "dual-IMU board vs single-IMU ZUPT on the rectangle and the stairs (max and mean position error)"
 
 COURSES: Final = ("rectangle", "stairs")
 METHODS: Final = ("single", "classic", "paper", "footnav")
@@ -109,12 +108,20 @@ def classic_track(
 class RunResult:
     """One course, one seed: the record, each method's IMU-1 track, and its errors.
 
-    Attributes:
-        recording: the emulated dual-IMU walk.
-        stance: (n,) the shared detector output.
-        pos1_n_m: method -> (n, 3) IMU 1's estimated position (NaN before a method could start).
-        max_error_m, mean_error_m: method -> error against IMU 1's truth, m.
-        paper: the paper filter's full output; footnav: footnav's.
+    Attributes
+    ----------
+    recording
+        the emulated dual-IMU walk.
+    stance
+        (n,) the shared detector output.
+    pos1_n_m
+        method -> (n, 3) IMU 1's estimated position (NaN before a method could start).
+    max_error_m, mean_error_m
+        method -> error against IMU 1's truth, m.
+    paper
+        the paper filter's full output.
+    footnav
+        footnav's.
     """
 
     recording: DualImuRecording

@@ -6,10 +6,9 @@ of a unit whose gyroscope had only its bias calibrated, as the platform's: ``gyr
 in :data:`footnav.device.emulator.sensors.imu_errors.AXIS_ERRORS`; ``--axis-errors none`` for the noise and biases
 alone) and the emulated ToF sensors (``footnav.device.emulator.sensors.tof``). With no axis errors, zero-
 velocity updates alone lose only millimetres of height in 70 s (0.1-2.7 cm RMS at footfalls, seeds
-1-8), far less than on real recordings with ZUPT alone (README "Accuracy": 0.25 m on the x-io loop
-in 42 s, 0.77 m on the OpenShoe loop); with the gyroscope's datasheet scale and cross-axis tolerances they lose
-2.5-124 cm, the real recordings' order. The same recording is navigated twice by the same
-navigator: with the ToF channel, and with it removed (zero-velocity updates alone), so the gain is
+1-8), far less than on real recordings with ZUPT alone; with the gyroscope's datasheet scale and
+cross-axis tolerances they lose 2.5-124 cm, the real recordings' order. The same recording is navigated
+twice by the same navigator: with the ToF channel, and with it removed (zero-velocity updates alone), so the gain is
 measured side by side. Figures against the emulator's ground truth:
 
 - clearance RMS: estimated clearance (``NavBatch.clearance_m``) minus the true height of the IMU above
@@ -32,14 +31,11 @@ from footnav.device.emulator.motion.floors import floor_of
 from footnav.device.emulator.motion.gait import GaitTruth, simulate_walk
 from footnav.device.emulator.sensors.imu_errors import AXIS_ERRORS, IMU_GRADES, corrupt
 from footnav.device.emulator.sensors.tof import TofSensorModel, tof_readings
-from footnav.pipeline.aiding.tof import CODE_NAMES, STATUS_NAMES, RangeBatch, TofConfig
+from footnav.pipeline.aiding.tof_types import CODE_NAMES, STATUS_NAMES, RangeBatch, TofConfig
 from footnav.pipeline.gait.tof_clearance import swing_clearance
 from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.navigation.navigator import NavConfig, navigate
 from footnav.pipeline.navigation.profiles import get_profile
-
-NAME = "tof"
-HELP = "foot clearance and vertical error with and without the ToF sensors (70 s walk, stairs)"
 
 WALKS: tuple[tuple[str, float], ...] = (("rectangle", 70.0), ("line", 70.0), ("stairs", 70.0))
 """(course, duration s) of the experiment's walks."""

@@ -75,24 +75,41 @@ class _Output:
 class ShoeFirmware:
     """A virtual OpenShoe/MIMU/Oblu unit's command handling and output generation.
 
-    Args:
-        t_s: (n,) base sample times, s (1 kHz on MIMU boards).
-        acc_b_mps2: (n, 3) calibrated specific force for 0x40/0x41.
-        gyr_b_radps: (n, 3) calibrated angular rate for 0x40/0x41.
-        imu_acc_b_mps2: (n, k, 3) per-IMU specific force for 0x28 (default: ``acc_b_mps2`` on 4 IMUs).
-        imu_gyr_b_radps: (n, k, 3) per-IMU angular rate for 0x28.
-        ins: INS states at ``t_s`` for 0x33 + 0x20/0x21 (footnav frame; sent z-down).
-        steps: stepwise-dead-reckoning packets for 0x34 / 0x14.
-        tof: ToF readings for state 0xE1.
-        baro: barometer readings for state 0xE2.
-        command_set: firmware generation.
-        speed: device seconds per wall second; ``math.inf`` = as fast as taken.
-        tick0: 64 MHz tick at ``t_s[0]``.
-        first_packet_number: package number of the first packet.
-        resend_interval_s: lossless resend period.
-        mcu_id: the 15 bytes answered to 0x04.
-        temp_c: (n,) sensor temperature, °C, sent in the raw output's temperature block (default: a
-            constant 24 °C, the register value 1000).
+    Parameters
+    ----------
+    t_s
+        (n,) base sample times, s (1 kHz on MIMU boards).
+    acc_b_mps2
+        (n, 3) calibrated specific force for 0x40/0x41.
+    gyr_b_radps
+        (n, 3) calibrated angular rate for 0x40/0x41.
+    imu_acc_b_mps2
+        (n, k, 3) per-IMU specific force for 0x28 (default: ``acc_b_mps2`` on 4 IMUs).
+    imu_gyr_b_radps
+        (n, k, 3) per-IMU angular rate for 0x28.
+    ins
+        INS states at ``t_s`` for 0x33 + 0x20/0x21 (footnav frame; sent z-down).
+    steps
+        stepwise-dead-reckoning packets for 0x34 / 0x14.
+    tof
+        ToF readings for state 0xE1.
+    baro
+        barometer readings for state 0xE2.
+    command_set
+        firmware generation.
+    speed
+        device seconds per wall second; ``math.inf`` = as fast as taken.
+    tick0
+        64 MHz tick at ``t_s[0]``.
+    first_packet_number
+        package number of the first packet.
+    resend_interval_s
+        lossless resend period.
+    mcu_id
+        the 15 bytes answered to 0x04.
+    temp_c
+        (n,) sensor temperature, °C, sent in the raw output's temperature block (default: a constant 24 °C, the register
+        value 1000).
     """
 
     def __init__(

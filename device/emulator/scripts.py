@@ -48,14 +48,21 @@ class InsTruth:
 class StepScript:
     """Stepwise-dead-reckoning packets to send, at device times ``t_s`` (m,).
 
-    Attributes:
-        t_s: (m,) emission (filter reset) times, s, increasing.
-        dx_m: (m, 3) displacement since the previous reset in that reset's heading frame, z up.
-        dheading_rad: (m,) heading change, rad.
-        cov_4x4: (m, 4, 4) covariance of (dx, dy, dz, dψ).
-        pos_n_m: (m, 3) true position at each reset relative to the start, in the start's heading
-            frame (the unit's frame after alignment): the track a host should rebuild.
-        heading_rad: (m,) true heading at each reset relative to the start heading.
+    Attributes
+    ----------
+    t_s
+        (m,) emission (filter reset) times, s, increasing.
+    dx_m
+        (m, 3) displacement since the previous reset in that reset's heading frame, z up.
+    dheading_rad
+        (m,) heading change, rad.
+    cov_4x4
+        (m, 4, 4) covariance of (dx, dy, dz, dψ).
+    pos_n_m
+        (m, 3) true position at each reset relative to the start, in the start's heading frame (the unit's frame after
+        alignment): the track a host should rebuild.
+    heading_rad
+        (m,) true heading at each reset relative to the start heading.
     """
 
     t_s: F64
@@ -152,12 +159,18 @@ def reset_indices(
 def steps_from_truth(t_s: F64, pos_n_m: F64, yaw_rad: F64, stance: NDArray[np.bool_], **reset_kw: float) -> StepScript:
     """The SWDR packets a unit would send for a true trajectory (see the module docstring).
 
-    Args:
-        t_s: (n,) sample times, s.
-        pos_n_m: (n, 3) true position, footnav frame.
-        yaw_rad: (n,) true heading (continuous).
-        stance: (n,) True where the foot is still.
-        reset_kw: ``pending_s`` / ``min_between_s`` overrides.
+    Parameters
+    ----------
+    t_s
+        (n,) sample times, s.
+    pos_n_m
+        (n, 3) true position, footnav frame.
+    yaw_rad
+        (n,) true heading (continuous).
+    stance
+        (n,) True where the foot is still.
+    reset_kw
+        ``pending_s`` / ``min_between_s`` overrides.
     """
     idx = np.concatenate([[0], reset_indices(t_s, stance, **reset_kw)])
     return _steps(np.asarray(t_s)[idx], np.asarray(pos_n_m)[idx], np.asarray(yaw_rad)[idx])

@@ -22,20 +22,18 @@ reader does not need one), chunk CRCs catch corruption, and any MCAP tool (``mca
 can list and export the raw bytes. The ``mcap`` Python package is pure Python.
 
 Reading: :func:`read_capture_info` for the header, :func:`iter_capture` for the messages (it stops at
-the end of a truncated file and reports it), and :class:`CaptureReplayLink`, a :class:`ByteLink` that
-plays one unit's device -> host bytes back chunk for chunk, so the same unit driver decodes them.
+the end of a truncated file and reports it); :class:`footnav.device.links.replay.CaptureReplayLink`
+plays one unit's device -> host bytes back read for read, so the same unit driver decodes them.
 """
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import hashlib
 import json
 import logging
 import threading
 import time
-from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -87,14 +85,22 @@ def footnav_version() -> str:
 class UnitHeader:
     """What a capture records about one unit before its bytes.
 
-    Attributes:
-        foot: ``foot`` (one unit), ``left`` or ``right``: the channel prefix.
-        unit: kind of unit, e.g. ``OpenShoe/MIMU (normal IMU 0x40)``.
-        command_set: firmware command set spoken, e.g. ``openshoe-2015``.
-        transport: ``serial``, ``ble`` or ``pty (emulator)``.
-        port: port, device path or address.
-        settings: output settings sent to the unit (rate divider, mode), JSON-able.
-        calibration: what is known of the unit's calibration and the noise profile assumed, JSON-able.
+    Attributes
+    ----------
+    foot
+        ``foot`` (one unit), ``left`` or ``right``: the channel prefix.
+    unit
+        kind of unit, e.g. ``OpenShoe/MIMU (normal IMU 0x40)``.
+    command_set
+        firmware command set spoken, e.g. ``openshoe-2015``.
+    transport
+        ``serial``, ``ble`` or ``pty (emulator)``.
+    port
+        port, device path or address.
+    settings
+        output settings sent to the unit (rate divider, mode), JSON-able.
+    calibration
+        what is known of the unit's calibration and the noise profile assumed, JSON-able.
     """
 
     foot: str
@@ -135,13 +141,19 @@ CaptureTap = Callable[[Direction, int, bytes], None]
 class CaptureWriter:
     """Write a capture file; safe to call from one thread (the event loop) while a timer flushes.
 
-    Args:
-        path: the ``.mcap`` file to create (parent folders are created).
-        session: extra ``footnav.session`` metadata (e.g. the command line).
-        flush_period_s: longest time between a read and its bytes reaching the OS.
+    Parameters
+    ----------
+    path
+        the ``.mcap`` file to create (parent folders are created).
+    session
+        extra ``footnav.session`` metadata (e.g. the command line).
+    flush_period_s
+        longest time between a read and its bytes reaching the OS.
 
-    Raises:
-        OSError: the file cannot be created.
+    Raises
+    ------
+    OSError
+        the file cannot be created.
     """
 
     def __init__(
@@ -298,10 +310,14 @@ class CaptureWriter:
 class CaptureInfo:
     """The header of a capture file.
 
-    Attributes:
-        path: the file.
-        session: ``footnav.session`` metadata.
-        units: one header per unit, in the order they were declared.
+    Attributes
+    ----------
+    path
+        the file.
+    session
+        ``footnav.session`` metadata.
+    units
+        one header per unit, in the order they were declared.
     """
 
     path: Path
@@ -347,14 +363,39 @@ def _check_magic(path: Path) -> None:
         raise InputFormatError(f"{path} is {what}; expected {EXPECTED}")
 
 
+def _mcap_records(f: IO[bytes], path: Path, state: ReadState, header_read: Callable[[], bool]) -> Iterator[Any]:
+    """The MCAP records of the open file ``f``, ``state.bytes_read`` kept up to date. A record that
+    does not decode ends them (``state.truncated``; ``state.corrupt_at`` unless it was the end of the
+    file), or raises :class:`InputFormatError` while ``header_read()`` is False."""
+    records = StreamReader(f, record_size_limit=_RECORD_SIZE_LIMIT, validate_crcs=True).records
+    while True:
+        try:
+            rec = next(records)
+        except StopIteration:
+            return
+        except Exception as exc:  # a corrupt file makes the MCAP and zstd decoders raise many kinds
+            if not header_read():
+                raise InputFormatError(
+                    f"{path} is not readable as MCAP ({type(exc).__name__}: {exc}); expected {EXPECTED}"
+                ) from exc
+            state.truncated = True
+            if not isinstance(exc, (EndOfFile, EOFError)):  # not the end of the file: corruption
+                state.corrupt_at = state.bytes_read
+            return
+        state.bytes_read = f.tell()
+        yield rec
+
+
 def iter_capture(path: Path, state: ReadState | None = None) -> Iterator[CaptureMessage | CaptureInfo]:
     """Every record of a capture in file order: a :class:`CaptureInfo` once the header has been read
     (before the first message), then the messages.
 
     Stops quietly at the end of a truncated file and sets ``state.truncated``.
 
-    Raises:
-        InputFormatError: not an MCAP file, or an MCAP file from another tool.
+    Raises
+    ------
+    InputFormatError
+        not an MCAP file, or an MCAP file from another tool.
     """
     path = Path(path)
     _check_magic(path)
@@ -365,23 +406,8 @@ def iter_capture(path: Path, state: ReadState | None = None) -> Iterator[Capture
     channels: dict[int, tuple[str, str]] = {}
     announced = False
     with open(path, "rb") as f:
-        reader = StreamReader(f, record_size_limit=_RECORD_SIZE_LIMIT, validate_crcs=True)
-        records = reader.records
-        while True:
-            try:
-                rec = next(records)
-            except StopIteration:
-                break
-            except Exception as exc:  # a corrupt file makes the MCAP and zstd decoders raise many kinds
-                if session is None:
-                    raise InputFormatError(
-                        f"{path} is not readable as MCAP ({type(exc).__name__}: {exc}); expected {EXPECTED}"
-                    ) from exc
-                state.truncated = True
-                if not isinstance(exc, (EndOfFile, EOFError)):  # not the end of the file: corruption
-                    state.corrupt_at = state.bytes_read
-                break
-            state.bytes_read = f.tell()
+        # the header is read once ``session`` is set (late binding wanted)
+        for rec in _mcap_records(f, path, state, header_read=lambda: session is not None):  # noqa: B023
             if isinstance(rec, Header):
                 if rec.profile != PROFILE:
                     raise InputFormatError(
@@ -413,8 +439,10 @@ def iter_capture(path: Path, state: ReadState | None = None) -> Iterator[Capture
 def read_capture_info(path: Path) -> CaptureInfo:
     """The header of a capture (reads up to its first message).
 
-    Raises:
-        InputFormatError: see :func:`iter_capture`.
+    Raises
+    ------
+    InputFormatError
+        see :func:`iter_capture`.
     """
     for item in iter_capture(path):
         if isinstance(item, CaptureInfo):
@@ -507,117 +535,3 @@ def _summary_from_index(path: Path) -> CaptureSummary | None:
     offset = int(info.session.get("monotonic_to_unix_ns", "0"))
     first, last = stats.message_start_time - offset, stats.message_end_time - offset
     return CaptureSummary(info, False, first, last, rx, events)
-
-
-class CaptureReplayLink:
-    """A :class:`footnav.device.links.base.ByteLink` that returns one unit's captured device -> host bytes, one
-    captured read per :meth:`read`, so the unit driver frames and batches them exactly as it did live.
-
-    Host timestamps: the driver stamps a batch with ``time.monotonic_ns()`` right after ``read``
-    returns. :meth:`captured_ns` maps such a replay-time stamp back to the captured read's host time,
-    so replayed estimates carry the live session's ``host_ns``.
-
-    Args:
-        path: the capture.
-        foot: which unit.
-        speed: 1.0 = the captured pace, N = N times faster, ``math.inf`` = as fast as possible.
-        paced: False returns reads at once until :attr:`paced` is set (a replay window's lead-in:
-            decoded, not navigated, not waited for).
-        clock_origin: ``(monotonic_ns at replay start, captured ns at replay start)`` shared by all
-            feet of one replay so they stay in step; default: set at the first read.
-        on_progress: called with (bytes read, file size) now and then.
-    """
-
-    def __init__(
-        self,
-        path: Path,
-        foot: str,
-        *,
-        speed: float = 1.0,
-        paced: bool = True,
-        clock_origin: list[int] | None = None,
-        on_progress: Callable[[int, int], None] | None = None,
-    ) -> None:
-        self.path = Path(path)
-        self.foot = foot
-        self.speed = speed
-        self.paced = paced
-        self.state = ReadState()
-        self.events: list[dict[str, Any]] = []
-        """Events of this unit met so far (JSON objects)."""
-        self.reads = 0
-        self._origin = clock_origin if clock_origin is not None else []
-        self._on_progress = on_progress
-        self._it = iter_capture(self.path, self.state)
-        self._stamps: deque[tuple[int, int]] = deque()  # (replay monotonic ns at return, captured ns)
-        self._closed = False
-        self.writes: list[bytes] = []
-        """Bytes the host wrote during the replay (nothing is sent anywhere)."""
-
-    @property
-    def name(self) -> str:
-        return f"{self.path.name} [{self.foot}]"
-
-    def _next_rx(self) -> CaptureMessage | None:
-        for item in self._it:
-            if isinstance(item, CaptureInfo):
-                if self.foot not in item.feet:
-                    known = ", ".join(item.feet) or "none"
-                    raise InputFormatError(f"{self.path} has no unit {self.foot!r} (units: {known})")
-                continue
-            if item.foot != self.foot:
-                continue
-            if item.direction == "events":
-                with contextlib.suppress(json.JSONDecodeError):
-                    self.events.append(json.loads(item.data))
-                continue
-            if item.direction != "rx":
-                continue
-            return item
-        return None
-
-    async def read(self) -> bytes:
-        """The next captured read; ``b""`` at the end of the capture or the window."""
-        if self._closed:
-            return b""
-        item = self._next_rx()
-        if item is None:
-            self._closed = True
-            return b""
-        if self.paced and not self._origin:
-            self._origin[:] = [time.monotonic_ns(), item.host_ns]
-        if not self.paced:
-            pass  # a window's lead-in: decoded at once
-        elif self.speed != float("inf"):
-            due_ns = self._origin[0] + (item.host_ns - self._origin[1]) / self.speed
-            delay = (due_ns - time.monotonic_ns()) / 1e9
-            if delay > 0:
-                await asyncio.sleep(delay)
-        elif self.reads % 64 == 0:
-            await asyncio.sleep(0)  # let the other foot and the sinks run
-        self.reads += 1
-        if self._on_progress is not None and self.reads % 256 == 0:
-            self._on_progress(self.state.bytes_read, self.state.size)
-        self._stamps.append((time.monotonic_ns(), item.host_ns))
-        return item.data
-
-    def captured_ns(self, replay_ns: int) -> int:
-        """The captured host time of the read that a driver stamped ``replay_ns`` (see class doc).
-
-        Stamps must be asked for in increasing order (batches arrive in order).
-        """
-        stamps = self._stamps
-        while len(stamps) > 1 and stamps[1][0] <= replay_ns:
-            stamps.popleft()
-        if not stamps:
-            return replay_ns
-        return stamps[0][1]
-
-    async def write(self, data: bytes) -> None:
-        """Commands go nowhere in a replay; kept for inspection."""
-        self.writes.append(bytes(data))
-
-    async def close(self) -> None:
-        self._closed = True
-        with contextlib.suppress(Exception):
-            self._it.close()  # type: ignore[attr-defined]

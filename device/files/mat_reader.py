@@ -98,9 +98,12 @@ _child = _Child()
 def load_mat(path: Path) -> dict[str, object]:
     """The variables of the .mat file at ``path`` (names starting ``__`` dropped).
 
-    Raises:
-        ReaderCrashedError: the reader's process died on this file.
-        Exception: whatever ``scipy.io.loadmat`` raised on it.
+    Raises
+    ------
+    ReaderCrashedError
+        the reader's process died on this file.
+    Exception
+        whatever ``scipy.io.loadmat`` raised on it.
     """
     return _child.load(path)
 

@@ -27,16 +27,26 @@ DEG = math.pi / 180.0
 class Recording:
     """IMU samples of one recording, in SI units, with what is known about the truth.
 
-    Attributes:
-        name: file stem.
-        format: loader key (``pyshoe``, ``xio``, ``openshoe``, ``csv``).
-        t_s: (n,) sample times, s, as recorded (may hold duplicates and jitter).
-        acc_b_mps2, gyr_b_radps: (n, 3) body-frame specific force and angular rate.
-        rate_hz: nominal rate, from the median sample interval.
-        profile: name of the unit profile (``footnav.pipeline.navigation.profiles``) that describes the sensor.
-        gt_pos_m: (n, 3) ground-truth position per sample (right-handed, z up), or None.
-        closed_loop: the walker returned to the start (loop-closure error is meaningful).
-        notes: facts about the file a person should know (handedness conversions, dropped rows).
+    Attributes
+    ----------
+    name
+        file stem.
+    format
+        loader key (``pyshoe``, ``xio``, ``openshoe``, ``csv``).
+    t_s
+        (n,) sample times, s, as recorded (may hold duplicates and jitter).
+    acc_b_mps2, gyr_b_radps
+        (n, 3) body-frame specific force and angular rate.
+    rate_hz
+        nominal rate, from the median sample interval.
+    profile
+        name of the unit profile (``footnav.pipeline.navigation.profiles``) that describes the sensor.
+    gt_pos_m
+        (n, 3) ground-truth position per sample (right-handed, z up), or None.
+    closed_loop
+        the walker returned to the start (loop-closure error is meaningful).
+    notes
+        facts about the file a person should know (handedness conversions, dropped rows).
     """
 
     name: str
@@ -106,8 +116,10 @@ def _loadmat_isolated(path: Path) -> dict[str, object]:
     """``scipy.io.loadmat`` in a child process (``footnav.device.files.mat_reader``): its C reader can crash on a
     corrupt file, which must be an error message, not a crash.
 
-    Raises:
-        InputFormatError: the file is not readable as a MATLAB .mat file, or crashed the reader.
+    Raises
+    ------
+    InputFormatError
+        the file is not readable as a MATLAB .mat file, or crashed the reader.
     """
     from footnav.device.files.mat_reader import ReaderCrashedError, load_mat
 
@@ -212,10 +224,18 @@ TIME_UNITS: Mapping[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 class CsvMapping:
     """Which columns of a generic CSV hold what, and in which units.
 
-    Attributes:
-        time: column name of the time stamp; acc, gyr: three column names each.
-        time_unit, acc_unit, gyr_unit: keys of TIME_UNITS, ACC_UNITS, GYR_UNITS.
-        profile: unit profile of the sensor; closed_loop: the walk ends at its start.
+    Attributes
+    ----------
+    time
+        column name of the time stamp.
+    acc, gyr
+        three column names each.
+    time_unit, acc_unit, gyr_unit
+        keys of TIME_UNITS, ACC_UNITS, GYR_UNITS.
+    profile
+        unit profile of the sensor.
+    closed_loop
+        the walk ends at its start.
     """
 
     time: str = "t"
@@ -316,8 +336,10 @@ LOADERS: dict[str, Callable[[Path], Recording]] = {
 def detect_format(path: Path) -> str:
     """Loader key for a file, from its content (magic bytes and header), not only its name.
 
-    Raises:
-        InputFormatError: the file is none of the known formats (the message lists them).
+    Raises
+    ------
+    InputFormatError
+        the file is none of the known formats (the message lists them).
     """
     try:
         with path.open("rb") as f:

@@ -2,7 +2,7 @@
 
 Serial (:mod:`footnav.device.links.serial`), BLE (:mod:`footnav.device.links.ble`), the reconnecting
 wrapper (:mod:`footnav.device.links.reconnecting`) and a capture's replay
-(:class:`footnav.device.files.capture.CaptureReplayLink`) are each a :class:`ByteLink`.
+(:class:`footnav.device.links.replay.CaptureReplayLink`) are each a :class:`ByteLink`.
 """
 
 from __future__ import annotations

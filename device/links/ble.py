@@ -182,8 +182,10 @@ def _pick(chars: list[BleakGATTCharacteristic], preferred_uuid: str | None) -> B
 def choose_characteristics(services: BleakGATTServiceCollection, where: str = "the unit") -> UartCharacteristics:
     """Choose the notify and write characteristics of a UART-style service by their properties.
 
-    Raises:
-        DeviceError: no (or no unambiguous) notify + write pair.
+    Raises
+    ------
+    DeviceError
+        no (or no unambiguous) notify + write pair.
     """
     preferred = {
         MIMU_SERVICE: (MIMU_NOTIFY, MIMU_WRITE),
@@ -231,14 +233,19 @@ class BleLinkStats:
 class BleLink:
     """A byte stream to a shoe unit over BLE (a :class:`footnav.device.links.base.ByteLink`).
 
-    Args:
-        target: a Bluetooth address (or macOS UUID), an advertised local name, a ``BLEDevice`` from a
-            scan, or None for the first unit advertising a known UART service.
-        backend: bleak backend classes; None = the platform's.
-        scan_timeout_s: how long to look for the unit.
-        connect_timeout_s: bleak's connect timeout.
-
     Use as ``async with BleLink("MIMU22BL") as link:`` or :meth:`open` / :meth:`close`.
+
+    Parameters
+    ----------
+    target
+        a Bluetooth address (or macOS UUID), an advertised local name, a ``BLEDevice`` from a scan, or None for the
+        first unit advertising a known UART service.
+    backend
+        bleak backend classes; None = the platform's.
+    scan_timeout_s
+        how long to look for the unit.
+    connect_timeout_s
+        bleak's connect timeout.
     """
 
     def __init__(
@@ -315,8 +322,10 @@ class BleLink:
     async def open(self) -> None:
         """Scan for the unit, connect, pick the characteristics and subscribe to notifications.
 
-        Raises:
-            DeviceError: no Bluetooth stack, unit not found, connection failed, or no UART service.
+        Raises
+        ------
+        DeviceError
+            no Bluetooth stack, unit not found, connection failed, or no UART service.
         """
         from bleak import BleakClient
         from bleak.exc import BleakError
@@ -415,8 +424,10 @@ class BleLink:
 
         Bytes that arrived before a disconnect are returned first.
 
-        Raises:
-            DeviceError: the unit disconnected (or was never connected).
+        Raises
+        ------
+        DeviceError
+            the unit disconnected (or was never connected).
         """
         while not self._chunks:
             if self._closed:
@@ -435,8 +446,10 @@ class BleLink:
     async def write(self, data: bytes) -> None:
         """Send ``data`` in chunks of at most :attr:`max_write_size` bytes.
 
-        Raises:
-            DeviceError: not connected, or the write failed.
+        Raises
+        ------
+        DeviceError
+            not connected, or the write failed.
         """
         from bleak.exc import BleakError
 

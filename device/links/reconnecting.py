@@ -172,15 +172,23 @@ class LinkHealth:
 class ReconnectingLink:
     """A :class:`footnav.device.links.base.ByteLink` that reconnects its inner link and resumes the unit's stream.
 
-    Args:
-        connect: opens a fresh inner link; called by :meth:`open` and for every reconnect attempt.
-        name: the unit, for messages.
-        resume: how to bring a reconnected unit back; default: write the learned resume bytes.
-        idle_timeout_s: idle-watchdog timeout (None: no watchdog).
-        give_up_after_s: stop reconnecting after this long and make ``read()`` raise (None: never).
-        on_event: called on every :class:`LinkEvent` (keep it quick; it runs on the event loop).
-        tx_tap: called as ``tap("tx", host_ns, data)`` for bytes the wrapper writes itself (resume
-            sequences), so a capture file sees them too.
+    Parameters
+    ----------
+    connect
+        opens a fresh inner link; called by :meth:`open` and for every reconnect attempt.
+    name
+        the unit, for messages.
+    resume
+        how to bring a reconnected unit back; default: write the learned resume bytes.
+    idle_timeout_s
+        idle-watchdog timeout (None: no watchdog).
+    give_up_after_s
+        stop reconnecting after this long and make ``read()`` raise (None: never).
+    on_event
+        called on every :class:`LinkEvent` (keep it quick; it runs on the event loop).
+    tx_tap
+        called as ``tap("tx", host_ns, data)`` for bytes the wrapper writes itself (resume sequences), so a capture file
+        sees them too.
     """
 
     def __init__(
@@ -291,8 +299,10 @@ class ReconnectingLink:
     async def open(self) -> None:
         """Connect for the first time (no retry: a unit that is not there is reported at once).
 
-        Raises:
-            DeviceError: from the connector.
+        Raises
+        ------
+        DeviceError
+            from the connector.
         """
         self._closed = False
         self._failure = None
@@ -307,8 +317,10 @@ class ReconnectingLink:
     async def read(self) -> bytes:
         """Next bytes from the unit, across reconnects; ``b""`` after :meth:`close`.
 
-        Raises:
-            DeviceError: reconnecting was given up (``give_up_after_s``), or never opened.
+        Raises
+        ------
+        DeviceError
+            reconnecting was given up (``give_up_after_s``), or never opened.
         """
         while True:
             if self._closed:
@@ -342,8 +354,10 @@ class ReconnectingLink:
         While reconnecting, a write made only of such commands returns at once (they are applied on
         reconnect); anything else raises.
 
-        Raises:
-            DeviceError: the link is down (and ``data`` is not only state commands) or the write failed.
+        Raises
+        ------
+        DeviceError
+            the link is down (and ``data`` is not only state commands) or the write failed.
         """
         only_state = self._learn(data)
         link = self._link

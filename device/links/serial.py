@@ -43,9 +43,11 @@ class SerialLink:
     async def open(self) -> None:
         """Open the port exclusively.
 
-        Raises:
-            DeviceError: the port does not exist, is busy (locked by another program), or cannot be
-                opened for another reason (permissions, not a tty).
+        Raises
+        ------
+        DeviceError
+            the port does not exist, is busy (locked by another program), or cannot be opened for another reason
+            (permissions, not a tty).
         """
         try:
             self._reader, self._writer = await serial_asyncio_fast.open_serial_connection(
@@ -63,10 +65,12 @@ class SerialLink:
         The port is polled only while a read waits: between reads the bytes wait in the kernel's
         tty buffer (kilobytes; 10 ms of a unit at 1 kHz is about 300 bytes), so a caller that
         reads every few ms (``OpenShoeUnit(read_interval_s=...)``) takes one wake-up per read
-        instead of one per packet (two feet at 1 kHz: 30 → 22-24 % of a core, README "Speed").
+        instead of one per packet.
 
-        Raises:
-            DeviceError: the unit was disconnected (or the port failed) during the read.
+        Raises
+        ------
+        DeviceError
+            the unit was disconnected (or the port failed) during the read.
         """
         if self._reader is None:
             if self._closed:
@@ -90,8 +94,10 @@ class SerialLink:
     async def write(self, data: bytes) -> None:
         """Send ``data`` and wait until the transport has taken it.
 
-        Raises:
-            DeviceError: the port is not open or the write failed.
+        Raises
+        ------
+        DeviceError
+            the port is not open or the write failed.
         """
         if self._writer is None or self._writer.is_closing():
             raise DeviceError(f"cannot write to {self.port}: the port is not open (unit disconnected?)")

@@ -150,8 +150,10 @@ def checksum16(data: bytes | bytearray | memoryview) -> int:
 def command_frame(cmd_id: int, payload: bytes = b"") -> bytes:
     """Return ``cmd_id | payload | chk_hi chk_lo``.
 
-    Raises:
-        ValueError: ``cmd_id`` is not in the 2015 command table or ``payload`` has the wrong length.
+    Raises
+    ------
+    ValueError
+        ``cmd_id`` is not in the 2015 command table or ``payload`` has the wrong length.
     """
     expected = COMMAND_PAYLOAD_LENGTHS.get(cmd_id)
     if expected is None:
@@ -194,8 +196,10 @@ def imu_mode_byte(rate_divider_log2: int | None, *, lossless: bool = False, pull
     bit 5 (0x20) pull (send once); ``flags`` may add the 0x28-only bits :data:`MODE_MAGNETOMETER`,
     :data:`MODE_INERTIAL` and :data:`MODE_TEMPERATURE`.
 
-    Raises:
-        ValueError: ``rate_divider_log2`` is outside 0..6, or ``flags`` has bits other than 0x08/0x40/0x80.
+    Raises
+    ------
+    ValueError
+        ``rate_divider_log2`` is outside 0..6, or ``flags`` has bits other than 0x08/0x40/0x80.
     """
     if rate_divider_log2 is not None and not 0 <= rate_divider_log2 <= MAX_RATE_DIVIDER_LOG2:
         raise ValueError(f"rate_divider_log2 must be in 0..{MAX_RATE_DIVIDER_LOG2}, got {rate_divider_log2}")
@@ -230,8 +234,10 @@ def device_ack(cmd_id: int) -> bytes:
 def parse_device_ack(data: bytes | bytearray | memoryview) -> int:
     """Return the command ID acknowledged by the 4-byte ACK ``data``.
 
-    Raises:
-        ProtocolError: not 4 bytes, wrong header, or wrong checksum.
+    Raises
+    ------
+    ProtocolError
+        not 4 bytes, wrong header, or wrong checksum.
     """
     if len(data) != DEVICE_ACK_LEN:
         raise ProtocolError(f"a device ACK is 4 bytes (A0 id chk chk), got {bytes(data).hex(' ')}")
@@ -245,8 +251,10 @@ def parse_device_ack(data: bytes | bytearray | memoryview) -> int:
 def data_packet(pkt_number: int, payload: bytes) -> bytes:
     """Device -> host data packet ``AA hi lo N payload chk_hi chk_lo`` (chk from AA through the payload).
 
-    Raises:
-        ValueError: payload longer than 255 bytes.
+    Raises
+    ------
+    ValueError
+        payload longer than 255 bytes.
     """
     if len(payload) > 0xFF:
         raise ValueError(f"a data packet holds at most 255 payload bytes, got {len(payload)}")
@@ -273,8 +281,10 @@ class CommandParser:
     when ``now_s`` passes its first byte's arrival by :data:`COMMAND_RX_TIMEOUT_S` (only if the caller
     passes times). Source: ``hcarlsso/openshoe-framework:src/external_interfaces/external_interface.c``.
 
-    Args:
-        command_set: whose table decides the IDs and payload lengths (default: the 2015 set).
+    Parameters
+    ----------
+    command_set
+        whose table decides the IDs and payload lengths (default: the 2015 set).
     """
 
     def __init__(self, command_set: CommandSet | None = None) -> None:
@@ -469,8 +479,10 @@ class Commands2015(_CommandsCommon):
 
         E.g. IMUs 0–3 at 500 Hz: ``28 00 00 00 0F 42 00 79``.
 
-        Raises:
-            ValueError: ``imu_mask`` is 0 or wider than 32 bits.
+        Raises
+        ------
+        ValueError
+            ``imu_mask`` is 0 or wider than 32 bits.
         """
         if not 0 < imu_mask < 1 << 32:
             raise ValueError(f"imu_mask must select 1..32 IMUs (a non-zero uint32), got 0x{imu_mask:X}")
@@ -486,8 +498,10 @@ class Commands2015(_CommandsCommon):
     def output_states(self, state_ids: Sequence[int], mode: int) -> OutgoingCommand:
         """``21 id×8 mode chk``: up to 8 states at once (unused slots 0x00).
 
-        Raises:
-            ValueError: more than 8 IDs.
+        Raises
+        ------
+        ValueError
+            more than 8 IDs.
         """
         if len(state_ids) > 8:
             raise ValueError(f"OUTPUT_MULTIPLE_STATES takes at most 8 state IDs, got {len(state_ids)}")
@@ -501,8 +515,10 @@ class Commands2015(_CommandsCommon):
     def set_state(self, state_id: int, value: bytes) -> OutgoingCommand:
         """SET_STATE_1/4/12/24/48/254 (0x12–0x17) chosen by ``len(value)``; ``value`` must be big-endian.
 
-        Raises:
-            ValueError: ``len(value)`` is not 1, 4, 12, 24, 48 or 254.
+        Raises
+        ------
+        ValueError
+            ``len(value)`` is not 1, 4, 12, 24, 48 or 254.
         """
         cmd_id = SET_STATE_COMMANDS.get(len(value))
         if cmd_id is None:

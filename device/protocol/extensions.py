@@ -93,13 +93,20 @@ class BaroArrays:
 class TofBatch:
     """ToF range readings of one read, in arrival order.
 
-    Attributes:
-        t_s: (n,) device time of each measurement, s.
-        sensor: (n,) sensor index 0..2.
-        range_m: (n,) range, m; NaN where status != 0.
-        status: (n,) status byte (see the module docstring).
-        counter: (n,) unwrapped package numbers.
-        host_ns: (n,) host receive time of the read.
+    Attributes
+    ----------
+    t_s
+        (n,) device time of each measurement, s.
+    sensor
+        (n,) sensor index 0..2.
+    range_m
+        (n,) range, m; NaN where status != 0.
+    status
+        (n,) status byte (see the module docstring).
+    counter
+        (n,) unwrapped package numbers.
+    host_ns
+        (n,) host receive time of the read.
     """
 
     t_s: NDArray[np.float64]
@@ -139,8 +146,10 @@ def _records(payloads: bytes | bytearray | memoryview, dtype: np.dtype[np.void],
 def decode_tof(payloads: bytes | bytearray | memoryview) -> TofArrays:
     """Decode n concatenated 9-byte ToF payloads.
 
-    Raises:
-        ValueError: wrong total length or a payload whose type byte is not 0xE1.
+    Raises
+    ------
+    ValueError
+        wrong total length or a payload whose type byte is not 0xE1.
     """
     rec = _records(payloads, TOF_DTYPE, STATE_TOF)
     status = rec["status"].astype(np.uint8)
@@ -157,8 +166,10 @@ def decode_tof(payloads: bytes | bytearray | memoryview) -> TofArrays:
 def decode_baro(payloads: bytes | bytearray | memoryview) -> BaroArrays:
     """Decode n concatenated 11-byte barometer payloads.
 
-    Raises:
-        ValueError: wrong total length or a payload whose type byte is not 0xE2.
+    Raises
+    ------
+    ValueError
+        wrong total length or a payload whose type byte is not 0xE2.
     """
     rec = _records(payloads, BARO_DTYPE, STATE_BARO)
     ok = rec["pressure"] != 0

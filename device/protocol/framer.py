@@ -87,9 +87,11 @@ class FramerStats:
 class Framer:
     """Finds data packets and device ACKs in a byte stream, resynchronising byte by byte.
 
-    Args:
-        accepted_lengths: payload lengths N that can occur; any other N marks a false header and is
-            skipped at once instead of waiting for N + 6 bytes. None accepts 0..255.
+    Parameters
+    ----------
+    accepted_lengths
+        payload lengths N that can occur; any other N marks a false header and is skipped at once instead of waiting for
+        N + 6 bytes. None accepts 0..255.
     """
 
     def __init__(self, accepted_lengths: Iterable[int] | None = None) -> None:

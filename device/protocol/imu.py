@@ -39,10 +39,14 @@ PACKET_DTYPE: Final = np.dtype(
 class NormalImuArrays:
     """Decoded payloads (struct of arrays).
 
-    Attributes:
-        ticks: (n,) uint32 device timestamps, 64 MHz ticks, wrapping.
-        acc_b_mps2: (n, 3) specific force, body frame, m/s².
-        gyr_b_radps: (n, 3) angular rate, body frame, rad/s.
+    Attributes
+    ----------
+    ticks
+        (n,) uint32 device timestamps, 64 MHz ticks, wrapping.
+    acc_b_mps2
+        (n, 3) specific force, body frame, m/s².
+    gyr_b_radps
+        (n, 3) angular rate, body frame, rad/s.
     """
 
     ticks: NDArray[np.uint32]
@@ -53,8 +57,10 @@ class NormalImuArrays:
 def decode_payloads(payloads: bytes | bytearray | memoryview) -> NormalImuArrays:
     """Decode the concatenation of n 28-byte payloads (one ``np.frombuffer``).
 
-    Raises:
-        ValueError: the length is not a multiple of 28.
+    Raises
+    ------
+    ValueError
+        the length is not a multiple of 28.
     """
     if len(payloads) % PAYLOAD_LEN:
         raise ValueError(f"normal-IMU payloads are {PAYLOAD_LEN} bytes each; got {len(payloads)} bytes")
@@ -80,11 +86,16 @@ def encode_packets(
 ) -> bytes:
     """Encode n whole packets, headers and checksums included, as one ``bytes`` of length 34·n.
 
-    Args:
-        numbers: (n,) package numbers; taken modulo 2**16.
-        ticks: (n,) timestamps in 64 MHz ticks; taken modulo 2**32.
-        acc_b_mps2: (n, 3) specific force, m/s² (sent as float32).
-        gyr_b_radps: (n, 3) angular rate, rad/s (sent as float32).
+    Parameters
+    ----------
+    numbers
+        (n,) package numbers; taken modulo 2**16.
+    ticks
+        (n,) timestamps in 64 MHz ticks; taken modulo 2**32.
+    acc_b_mps2
+        (n, 3) specific force, m/s² (sent as float32).
+    gyr_b_radps
+        (n, 3) angular rate, rad/s (sent as float32).
     """
     n = len(numbers)
     rec = np.empty(n, dtype=PACKET_DTYPE)
@@ -168,9 +179,12 @@ class CounterTracker:
     def update(self, numbers: NDArray[np.integer]) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
         """Track the next package numbers (n,), in arrival order.
 
-        Returns:
-            (unwrapped counters (n,) int64, duplicate mask (n,): True where the number had been
-            received before).
+        Returns
+        -------
+        counters : NDArray[np.int64]
+            unwrapped counters (n,) int64.
+        duplicate : NDArray[np.bool_]
+            duplicate mask (n,): True where the number had been received before.
         """
         raw = np.asarray(numbers, dtype=np.int64)
         dup = np.zeros(raw.size, dtype=np.bool_)
@@ -216,11 +230,16 @@ class CounterTracker:
 def frame_payload_rows(numbers: NDArray[np.integer], rows: NDArray[np.uint8]) -> NDArray[np.uint8]:
     """Frame m equal-length payloads at once: ``AA hi lo N payload chk_hi chk_lo`` per row.
 
-    Args:
-        numbers: (m,) package numbers, taken modulo 2**16.
-        rows: (m, L) payload bytes, L <= 255.
+    Parameters
+    ----------
+    numbers
+        (m,) package numbers, taken modulo 2**16.
+    rows
+        (m, L) payload bytes, L <= 255.
 
-    Returns:
+    Returns
+    -------
+    NDArray[np.uint8]
         (m, L + 6) packet bytes; ``.tobytes()`` is the byte stream.
     """
     rows = np.asarray(rows, dtype=np.uint8)

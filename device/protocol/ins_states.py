@@ -68,8 +68,10 @@ _TRIU: Final = np.triu_indices(9)
 class InsLayout:
     """The states of one INS payload, in wire (ascending ID) order.
 
-    Raises:
-        ValueError: a state this module does not decode, or none.
+    Raises
+    ------
+    ValueError
+        a state this module does not decode, or none.
     """
 
     state_ids: tuple[int, ...] = DEFAULT_INS_STATES
@@ -99,15 +101,24 @@ class InsLayout:
 class InsStateBatch:
     """On-board INS estimates, in footnav's navigation frame (z up), duplicates dropped.
 
-    Attributes:
-        t_s: (n,) device time, s (NaN if the time stamp state 0x01 was not requested).
-        pos_n_m: (n, 3) position, m, or None if not requested.
-        vel_n_mps: (n, 3) velocity, m/s, or None.
-        quat_nb_wxyz: (n, 4) attitude body -> nav, scalar first, or None.
-        cov_9x9: (n, 9, 9) error covariance of (δpos, δvel, δatt), nav frame, or None.
-        interrupt_counter: (n,) the unit's sample counter, or None.
-        counter: (n,) unwrapped package numbers.
-        host_ns: (n,) host receive time of the read.
+    Attributes
+    ----------
+    t_s
+        (n,) device time, s (NaN if the time stamp state 0x01 was not requested).
+    pos_n_m
+        (n, 3) position, m, or None if not requested.
+    vel_n_mps
+        (n, 3) velocity, m/s, or None.
+    quat_nb_wxyz
+        (n, 4) attitude body -> nav, scalar first, or None.
+    cov_9x9
+        (n, 9, 9) error covariance of (δpos, δvel, δatt), nav frame, or None.
+    interrupt_counter
+        (n,) the unit's sample counter, or None.
+    counter
+        (n,) unwrapped package numbers.
+    host_ns
+        (n,) host receive time of the read.
     """
 
     t_s: NDArray[np.float64]
@@ -171,8 +182,10 @@ def cov9_ned_to_up(cov: NDArray[np.floating]) -> NDArray[np.float64]:
 def decode_payloads(payloads: bytes | bytearray | memoryview, layout: InsLayout) -> InsArrays:
     """Decode n concatenated payloads of ``layout`` and convert them to footnav's frame.
 
-    Raises:
-        ValueError: the length is not a multiple of the payload length.
+    Raises
+    ------
+    ValueError
+        the length is not a multiple of the payload length.
     """
     size = layout.payload_len
     if len(payloads) % size:
@@ -203,8 +216,10 @@ def encode_payloads(
 
     Arrays are (n,), (n, 3), (n, 4) or (n, 9, 9); states in ``layout`` whose array is None are zeros.
 
-    Raises:
-        ValueError: no array given to take n from.
+    Raises
+    ------
+    ValueError
+        no array given to take n from.
     """
     given = [a for a in (ticks, interrupt_counter, pos_n_m, vel_n_mps, quat_nb_wxyz, cov_9x9) if a is not None]
     if not given:

@@ -59,10 +59,14 @@ def ids_to_mask(imu_ids: tuple[int, ...] | list[int]) -> int:
 class RawImuLayout:
     """Which blocks a 0x28 payload holds.
 
-    Attributes:
-        imu_ids: IMU indices present, ascending.
-        temperature: temperature block present (mode bit 0x80).
-        magnetometer: magnetometer block present (mode bit 0x08).
+    Attributes
+    ----------
+    imu_ids
+        IMU indices present, ascending.
+    temperature
+        temperature block present (mode bit 0x80).
+    magnetometer
+        magnetometer block present (mode bit 0x08).
     """
 
     imu_ids: tuple[int, ...]
@@ -107,12 +111,18 @@ class RawImuLayout:
 class RawImuArrays:
     """Decoded payloads (struct of arrays), n samples of k IMUs.
 
-    Attributes:
-        ticks: (n,) uint32 64 MHz timestamps, wrapping.
-        acc_b_mps2: (n, k, 3) specific force per IMU, that IMU's axes, m/s².
-        gyr_b_radps: (n, k, 3) angular rate per IMU, rad/s.
-        temperature_raw: (n, k) raw temperature registers, or None.
-        mag_raw: (n, k, 3) raw magnetometer registers, or None.
+    Attributes
+    ----------
+    ticks
+        (n,) uint32 64 MHz timestamps, wrapping.
+    acc_b_mps2
+        (n, k, 3) specific force per IMU, that IMU's axes, m/s².
+    gyr_b_radps
+        (n, k, 3) angular rate per IMU, rad/s.
+    temperature_raw
+        (n, k) raw temperature registers, or None.
+    mag_raw
+        (n, k, 3) raw magnetometer registers, or None.
     """
 
     ticks: NDArray[np.uint32]
@@ -126,15 +136,24 @@ class RawImuArrays:
 class RawImuBatch:
     """Raw IMU samples of one read (duplicates dropped), in SI units.
 
-    Attributes:
-        imu_ids: (k,) IMU indices of axis 1, ascending.
-        t_s: (n,) device time, s, unwrapped from the 64 MHz counter.
-        acc_b_mps2: (n, k, 3) specific force per IMU, m/s².
-        gyr_b_radps: (n, k, 3) angular rate per IMU, rad/s.
-        temperature_raw: (n, k) raw temperature counts, or None.
-        mag_raw: (n, k, 3) raw magnetometer counts, or None.
-        counter: (n,) unwrapped package numbers.
-        host_ns: (n,) host receive time of the read, ``time.monotonic_ns()``.
+    Attributes
+    ----------
+    imu_ids
+        (k,) IMU indices of axis 1, ascending.
+    t_s
+        (n,) device time, s, unwrapped from the 64 MHz counter.
+    acc_b_mps2
+        (n, k, 3) specific force per IMU, m/s².
+    gyr_b_radps
+        (n, k, 3) angular rate per IMU, rad/s.
+    temperature_raw
+        (n, k) raw temperature counts, or None.
+    mag_raw
+        (n, k, 3) raw magnetometer counts, or None.
+    counter
+        (n,) unwrapped package numbers.
+    host_ns
+        (n,) host receive time of the read, ``time.monotonic_ns()``.
     """
 
     imu_ids: tuple[int, ...]
@@ -153,8 +172,10 @@ class RawImuBatch:
 def decode_payloads(payloads: bytes | bytearray | memoryview, layout: RawImuLayout) -> RawImuArrays:
     """Decode the concatenation of n payloads of ``layout`` (one ``np.frombuffer``).
 
-    Raises:
-        ValueError: the length is not a multiple of the payload length.
+    Raises
+    ------
+    ValueError
+        the length is not a multiple of the payload length.
     """
     size = layout.payload_len
     if len(payloads) % size:
@@ -198,12 +219,18 @@ def encode_payloads(
 ) -> NDArray[np.uint8]:
     """Encode n payloads as an (n, L) byte matrix (for the emulator; frame with ``frame_payload_rows``).
 
-    Args:
-        layout: what the payload holds.
-        ticks: (n,) 64 MHz timestamps, taken modulo 2**32.
-        registers: (n, k, 6) int16 registers (ax ay az gx gy gz) of the layout's IMUs.
-        temperature_raw: (n, k) when ``layout.temperature`` (zeros if None).
-        mag_raw: (n, k, 3) when ``layout.magnetometer`` (zeros if None).
+    Parameters
+    ----------
+    layout
+        what the payload holds.
+    ticks
+        (n,) 64 MHz timestamps, taken modulo 2**32.
+    registers
+        (n, k, 6) int16 registers (ax ay az gx gy gz) of the layout's IMUs.
+    temperature_raw
+        (n, k) when ``layout.temperature`` (zeros if None).
+    mag_raw
+        (n, k, 3) when ``layout.magnetometer`` (zeros if None).
     """
     n = len(ticks)
     rec = np.zeros(n, dtype=layout.dtype)

@@ -50,11 +50,16 @@ _TRIU4: Final = np.triu_indices(4)
 class StepArrays:
     """Decoded SWDR payloads, in footnav's frame (z up).
 
-    Attributes:
-        dx_m: (n, 3) displacement in the heading frame of the previous reset, m.
-        dheading_rad: (n,) heading change, rad (positive = counter-clockwise seen from above).
-        cov_4x4: (n, 4, 4) covariance of (dx, dy, dz, dψ).
-        step_counter: (n,) the unit's uint16 step counter.
+    Attributes
+    ----------
+    dx_m
+        (n, 3) displacement in the heading frame of the previous reset, m.
+    dheading_rad
+        (n,) heading change, rad (positive = counter-clockwise seen from above).
+    cov_4x4
+        (n, 4, 4) covariance of (dx, dy, dz, dψ).
+    step_counter
+        (n,) the unit's uint16 step counter.
     """
 
     dx_m: NDArray[np.float64]
@@ -80,8 +85,10 @@ def pack_cov4(cov: NDArray[np.floating]) -> NDArray[np.float64]:
 def decode_payloads(payloads: bytes | bytearray | memoryview) -> StepArrays:
     """Decode n concatenated 58-byte payloads and convert them to footnav's frame.
 
-    Raises:
-        ValueError: the length is not a multiple of 58.
+    Raises
+    ------
+    ValueError
+        the length is not a multiple of 58.
     """
     if len(payloads) % PAYLOAD_LEN:
         raise ValueError(f"stepwise payloads are {PAYLOAD_LEN} bytes each; got {len(payloads)} bytes")
@@ -110,17 +117,28 @@ def encode_payloads(
 class StepBatch:
     """SWDR packets applied to the track (each package number once), in footnav's frame.
 
-    Attributes:
-        counter: (n,) unwrapped package numbers.
-        step_counter: (n,) the unit's step counter.
-        dx_m: (n, 3) each step in the heading frame of the previous reset, m.
-        dheading_rad: (n,) heading change of each step, rad.
-        step_cov_4x4: (n, 4, 4) covariance of (dx, dy, dz, dψ) of each step.
-        pos_n_m: (n, 3) accumulated position after each step, m (start = origin).
-        heading_rad: (n,) accumulated heading after each step, rad (start = 0, not wrapped).
-        cov_4x4: (n, 4, 4) covariance of the accumulated (x, y, z, ψ).
-        is_step: (n,) False for standing-still resets (|Δ| < :data:`MIN_STEP_M`).
-        host_ns: (n,) host receive time of the read.
+    Attributes
+    ----------
+    counter
+        (n,) unwrapped package numbers.
+    step_counter
+        (n,) the unit's step counter.
+    dx_m
+        (n, 3) each step in the heading frame of the previous reset, m.
+    dheading_rad
+        (n,) heading change of each step, rad.
+    step_cov_4x4
+        (n, 4, 4) covariance of (dx, dy, dz, dψ) of each step.
+    pos_n_m
+        (n, 3) accumulated position after each step, m (start = origin).
+    heading_rad
+        (n,) accumulated heading after each step, rad (start = 0, not wrapped).
+    cov_4x4
+        (n, 4, 4) covariance of the accumulated (x, y, z, ψ).
+    is_step
+        (n,) False for standing-still resets (|Δ| < :data:`MIN_STEP_M`).
+    host_ns
+        (n,) host receive time of the read.
     """
 
     counter: NDArray[np.int64]
@@ -161,7 +179,9 @@ class StepwiseTracker:
     def update(self, numbers: NDArray[np.integer] | list[int], payloads: bytes, host_ns: int = 0) -> StepBatch | None:
         """Apply the new packets among ``numbers`` (n,) / ``payloads`` (n × 58 bytes), in order.
 
-        Returns:
+        Returns
+        -------
+        StepBatch | None
             The applied packets, or None if all were repeats.
         """
         raw = np.asarray(numbers, dtype=np.int64)

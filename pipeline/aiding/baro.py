@@ -3,12 +3,8 @@
 Pressure altitude (ISA troposphere, ICAO Doc 7488): h = 44330.77 m · (1 − (p / p_ref)^0.190263),
 here relative to the first valid reading of the session (p_ref), so it shows height changes.
 
-Why the filter does not use it: footnav's ToF aiding already follows floor changes tread by tread
-(``footnav.pipeline.aiding.tof``), and a barometer's relative noise and drift are coarse next to it: a
-BMP280-class sensor has 0.12 hPa relative accuracy (about 1 m) and its reading moves with doors,
-ventilation and weather by several hPa an hour (Bosch BST-BMP280-DS001); a 16 cm riser is 0.02 hPa.
-It could tell which floor of a building a walk ends on after a lift ride (no steps for the ToF to
-see); that is not implemented.
+The filter does not use it; why (next to the ToF aiding of ``footnav.pipeline.aiding.tof``): the
+documentation's design page "ToF aiding".
 """
 
 from __future__ import annotations

@@ -1,85 +1,33 @@
 """Foot height from time-of-flight range sensors: readings, the floor reference, per-sample clearance.
 
 The navigator (``footnav.pipeline.navigation.navigator``) splits its IMU batches at the readings' times and hands each
-reading to :meth:`TofAiding.apply`, which updates the filter state in place through the compiled
-measurement of :mod:`footnav.pipeline.aiding.tof_measurement` (Merat, Harvey, Mitsis, eqs. 20-21).
+reading to :meth:`TofAiding.apply`, which updates the filter state in place through the compiled measurement of
+:mod:`footnav.pipeline.aiding.tof_measurement` (Merat, Harvey, Mitsis, eqs. 20-21).
 
-**Floor reference.** The update needs the height z_f of the floor the ray hits. footnav keeps a list
-of floor *levels* it has stood on, starting with the start floor (z = 0: the IMU's reference point
-rests on it at alignment, the flat-floor prior), and a *reference level*, the floor of the current or
-last stance:
+**Floor reference.** The update needs the height z_f of the floor the ray hits. footnav keeps the floor *levels*
+stood on, starting with the start floor (z = 0: the IMU's reference point rests on it at alignment), and a
+*reference level*, the floor of the current or last stance. Once a stance has lasted ``decide_after_s``, its next
+``decide_readings`` valid readings are not applied but give floor observations ``p̂_z + w_z`` (where the ray hit);
+their median decides the stance floor: the reference level if within ``same_floor_m`` of it, else a known level
+within ``snap_m``, else a new level. The stance's later readings update the state against that level. A new level
+is placed at ``p̂_z`` (the IMU's reference point resting on the tread) as a filter state: a stochastic clone of δp_z,
+its variance plus ``new_level_sigma_m``² (Roumeliotis and Burdick, "Stochastic cloning", ICRA 2002). A reading on
+it measures p_z + w_z − z_level (−1 at the level in the row of :mod:`.tof_measurement`), the propagation holds it
+constant (F = I, Q = 0), and every update corrects it through its cross-covariances. The :data:`LEVEL_STATES` most
+recently used levels are states; an older one is marginalised (its row and column dropped) and keeps its height.
+In swing, readings are referenced to the last stance floor; a sensor whose reading was rejected there as a step
+edge is not applied again until the next stance (its readings are counted as step edges).
 
-- at each stance (the zero-velocity detector's flag), once it has lasted ``decide_after_s`` (the
-  zero-velocity updates have then corrected the position by what they learn about the swing), the
-  next ``decide_readings`` valid readings are not applied but give floor observations ``p̂_z + w_z``
-  (where the ray hit); their median decides the stance floor: the reference level if within
-  ``same_floor_m`` of it (the absolute reference is kept: this is what bounds the vertical drift),
-  else a known level within ``snap_m`` (back on a floor seen before), else a new level. The
-  stance's later readings then update the state against that level.
-- **levels are states of the filter.** The start floor is z = 0 by definition of the frame. A new
-  level is placed where the state puts the IMU's reference point, ``p̂_z`` (it rests on the tread,
-  as at alignment on the start floor), with the error of the state's height: δp_z is cloned into a
-  level state (its row and column of the covariance copied, its variance plus
-  ``new_level_sigma_m``²; stochastic cloning, Roumeliotis and Burdick, "Stochastic cloning: a
-  generalized framework for processing relative state measurements", ICRA 2002). A reading on a
-  level that is a state measures p_z + w_z − z_level (the row of :mod:`.tof_update` with −1 at the
-  level), and every update of the filter corrects the levels through their cross-covariances. So
-  what the filter learns later corrects the treads already placed: on a straight flight a forward
-  accelerometer bias cannot be told from pitch, and in each pitched swing it turns into height that
-  nothing observes until the heading changes (the landing's turn); the ZUPTs there estimate the
-  bias, and the treads climbed with it move by the height it made. The propagation treats the
-  levels as constants (F = I, Q = 0, :func:`footnav.pipeline.navigation.eskf._propagate_cov`). :data:`LEVEL_STATES`
-  levels are kept as states, the most recently stood on; an older one leaves the state (its row
-  and column are dropped, a marginalisation) and keeps its height.
-  Measured on the emulated stairs, seeds 1-8, the platform's unit: vertical error at footfalls
-  0.33-1.32 cm, 6.7-21x lower than ZUPT alone. Before, a new level was placed once, at the end of
-  its first stance (its readings held back until then), and the vertical position error re-anchored
-  to it (the row and column of δp_z zeroed): 0.47-1.91 cm, 1.3-27x (seed 3 worst: the bias learned
-  at the turn could not reach the treads, and back on those treads the next climb was pulled to
-  their errors). Cloned at the end of the first stance instead of when decided: 0.36-1.36 cm,
-  4.2-18x. (Before that, the level was the median of the stance's floor observations with the
-  covariance left as it was: the first readings of the new level yanked the state by the median's
-  noise; 0.29-3.0x. Taking a new tread's height from the step-edge readings of the swing, while the
-  state was still tied to the old tread, was measured worse: 7 cm instead of 2 cm after 70 s; so
-  was chaining such observations tread to tread and updating against them in the swing: 1.7-2x the
-  vertical error of ZUPT alone.)
-- in swing, readings are referenced to the last stance floor; a ray that sees another tread gives an
-  innovation of about a riser and is rejected as a step edge by the gate of :mod:`.tof_update`.
-  A sensor that has seen past an edge stays past it until the next stance: its later readings in the
-  swing are not applied (counted as step edges). Otherwise a reflection that lengthens a range to the
-  next tread by about a riser (a glossy step) passes the gate as a reading of the old floor and drags
-  the height in mid-swing, where nothing corrects it before the next tread's level is taken.
-
-Floor changes smaller than ``same_floor_m`` (6 cm: a thick rug, a door sill) are taken as the same
-floor: a limitation, documented in the README.
-
-**Clearance.** The estimated clearance of a sample is ``p̂_z`` minus the floor under the IMU. In a
-stance whose floor is decided it is that floor.
-Otherwise it comes from the most recent hit points (the last ``hit_memory`` readings), each at its
-floor height snapped to a known level within ``snap_m``. A hit counts only when another recent hit
-agrees with it within ``snap_m``: a single reflection is not a floor, even one that lands near a
-known level (on stairs the levels are a stride's rise apart, so a reflection 5-50 cm too long often
-does; counting those measured 3.3-4.6 cm clearance RMS on the emulated stairs with 10 % reflections,
-2.6-3.4 cm without them). A hit at no known level (a tread seen only in swing) is taken at the mean
-height of the recent hits that agree with it (one reading has the range noise, 1 cm).
-
-In swing the hits and the IMU are placed along the way walked since the last stance (the horizontal
-direction from where that stance ended): a step edge lies between the nearest hit behind the IMU and
-the nearest ahead of it, and where these are on different floors the clearance is measured from a
-floor interpolated between them by distance (the expected floor for an edge anywhere between them:
-a 16 cm riser taken a few centimetres early or late costs less than the hard switch of the nearest
-hit, which put the IMU on the wrong tread for about 8 ms at each edge: 1.5 cm RMS on the emulated
-stairs); the floor reported under the IMU is the nearer of the two. The bracket is narrowed with
-the edges learned in earlier swings: at the end of each swing, its hits are grouped by surface
-(heights within ``snap_m``) and sorted along the way, and between consecutive surfaces the edge lies
-between the last hit of the one and the first of the next; an edge seen again (the way down the
-same flight, the next lap; its line taken across the way walked, as a step edge is) with the same
-two floors is intersected with that bracket (each widened by ``EDGE_MARGIN_M``; an intersection
-that would be empty is ignored). Measured on the emulated stairs, seeds 1-8: 1.16-1.29 cm clearance
-RMS without the learned edges, 1.02-1.18 cm with them. Elsewhere (or before the IMU
-has moved ``SWING_MIN_M``) it is the nearest hit's.
-A toe sensor ranges the tread ahead before the IMU is over it, so the floor under the IMU changes
-close to where the step edge is.
+**Clearance.** ``p̂_z`` minus the floor under the IMU: in a stance whose floor is decided, that floor; otherwise
+from the last ``hit_memory`` hit points, each at its floor height snapped to a known level within ``snap_m`` and
+counted only when another hit agrees with it within ``snap_m`` (a hit at no known level is taken at the mean height
+of the hits that agree with it). In swing, hits and IMU are placed along the way walked since the last stance;
+where the nearest hit behind the IMU and the nearest ahead are on different floors, the floor is interpolated
+between them by distance (the tread reported is the nearer one). That bracket is intersected with the brackets of
+the same edge (same two floors) learned at the end of earlier swings, between consecutive surfaces along the way,
+each widened by ``EDGE_MARGIN_M``; an empty intersection is ignored. Before the IMU has moved ``SWING_MIN_M``, the
+nearest hit's floor. Heights are in the navigation frame (z up), lever arms and directions in body axes; SI units.
+Why this design, with its measurements: the documentation's design page "ToF aiding".
 """
 
 from __future__ import annotations
@@ -88,12 +36,21 @@ import itertools
 import math
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import numpy as np
 from footnav.pipeline.aiding import tof_measurement as tu
+from footnav.pipeline.aiding.tof_types import (
+    CODE_NAMES,
+    DISABLED,
+    FLOOR_PENDING,
+    INVALID_STATUS,
+    STATUS_NAMES,
+    UNKNOWN_SENSOR,
+    RangeBatch,
+    TofConfig,
+    TofCounts,
+)
 from footnav.pipeline.navigation.eskf import N_STATE, clone_height
-from footnav.pipeline.stance.height_detector import HeightDetectorParams
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]
@@ -104,11 +61,11 @@ has moved this far from it (before, the nearest hit's)."""
 
 EDGE_MAX_M = 0.15
 """A step edge crossed in a swing is remembered when the hits on either side of it are at most this
-far apart along the way (wider brackets say little: the footprints are 3-10 cm apart in swing)."""
+far apart along the way, m."""
 
 EDGE_MARGIN_M = 0.01
-"""Each remembered edge bracket is widened by this on both sides before use: the horizontal position
-drifts between two passes over the same edge (about 1 cm RMS on the emulated walks)."""
+"""Each remembered edge bracket is widened by this on both sides before use (the horizontal position
+drifts between two passes over the same edge), m."""
 
 EDGE_MEMORY = 2000
 """Edges remembered (the most recent)."""
@@ -116,167 +73,6 @@ EDGE_MEMORY = 2000
 LEVEL_STATES = 16
 """Floor levels kept as states of the filter (the most recently used; module docstring). An older
 level leaves the state (marginalised: its row and column are dropped) and keeps its last value."""
-
-
-def _unit(v: tuple[float, float, float]) -> tuple[float, float, float]:
-    n = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
-    return (v[0] / n, v[1] / n, v[2] / n)
-
-
-DEFAULT_LEVER_B_M: tuple[tuple[float, float, float], ...] = (
-    (0.12, 0.0, 0.03),  # toe
-    (0.0, -0.045, 0.03),  # mid-foot, outer side
-    (-0.10, 0.0, 0.04),  # heel
-)
-"""Sensor positions from the IMU's reference point, body axes (x toe, y left, z up), m. The
-multi-sensor paper places three sensors along the sole without coordinates; these are assumptions,
-shared with the emulator (``footnav.device.emulator.sensors.tof``)."""
-
-DEFAULT_DIR_B: tuple[tuple[float, float, float], ...] = (
-    _unit((0.17, 0.0, -1.0)),  # toe, tilted 10° forward
-    (0.0, 0.0, -1.0),
-    _unit((-0.17, 0.0, -1.0)),  # heel, tilted 10° back
-)
-"""Sensor viewing directions, unit vectors in body axes."""
-
-STATUS_NAMES: dict[int, str] = {1: "timeout", 2: "no_target", 3: "weak_signal", 4: "sensor_error"}
-"""Status codes of the ToF extension state (``footnav.device.protocol.extensions``); 0 is a valid reading."""
-
-CODE_NAMES: dict[int, str] = {
-    tu.USED: "used",
-    tu.NOT_FINITE: "not_finite",
-    tu.BELOW_FLOOR: "below_floor",
-    tu.STEP_EDGE: "step_edge",
-    tu.OUTLIER: "outlier",
-}
-# codes beyond the measurement's own
-FLOOR_PENDING, INVALID_STATUS, UNKNOWN_SENSOR, DISABLED = 10, 11, 12, 13
-CODE_NAMES |= {
-    FLOOR_PENDING: "floor_pending",
-    INVALID_STATUS: "invalid_status",
-    UNKNOWN_SENSOR: "unknown_sensor",
-    DISABLED: "not_used",
-}
-
-
-@dataclass(frozen=True, slots=True)
-class RangeBatch:
-    """ToF range readings handed to the navigator, in time order.
-
-    Attributes:
-        t_s: (m,) device time of each measurement, s (the IMU's clock).
-        sensor: (m,) sensor index.
-        range_m: (m,) range, m (NaN when there is none).
-        status: (m,) the unit's status byte (0 valid; see :data:`STATUS_NAMES`).
-    """
-
-    t_s: F64
-    sensor: NDArray[np.int64]
-    range_m: F64
-    status: NDArray[np.uint8]
-
-    def __len__(self) -> int:
-        return int(self.t_s.shape[0])
-
-    def select(self, index: slice | NDArray[np.bool_] | NDArray[np.int64]) -> RangeBatch:
-        return RangeBatch(self.t_s[index], self.sensor[index], self.range_m[index], self.status[index])
-
-    @staticmethod
-    def concat(batches: list[RangeBatch]) -> RangeBatch:
-        return RangeBatch(
-            np.concatenate([b.t_s for b in batches]),
-            np.concatenate([b.sensor for b in batches]),
-            np.concatenate([b.range_m for b in batches]),
-            np.concatenate([b.status for b in batches]),
-        )
-
-
-@dataclass(frozen=True, slots=True)
-class TofConfig:
-    """ToF aiding settings (SI units).
-
-    Attributes:
-        lever_b_m, dir_b: per sensor, position from the IMU and unit viewing direction (body axes).
-        use: apply the readings (False: decode, count and show them only; the inertial-only run).
-        sigma_range_m: range noise 1σ (VL53L0X about 1 cm on a white target within 1.2 m, ST DS11555).
-        sigma_floor_m: floor roughness and unlevelness 1σ added to each reading.
-        gate_chi2: normalised-innovation gate, χ²(1) at 99.9 %.
-        step_m: innovations larger than this are step edges (half the smallest riser footnav expects).
-        below_m: a measured height more than this under the floor is rejected.
-        same_floor_m, snap_m, decide_readings, decide_after_s, hit_memory: the floor reference
-            (module docstring).
-        new_level_sigma_m: 1σ of the vertical position relative to a new level when it is placed
-            (the IMU's reference point resting on the tread; module docstring).
-        update_in_swing: apply readings in swing too (else only in stance).
-        detector: zero-velocity detection with the foot's height (``footnav.pipeline.stance.height_detector``).
-    """
-
-    lever_b_m: tuple[tuple[float, float, float], ...] = DEFAULT_LEVER_B_M
-    dir_b: tuple[tuple[float, float, float], ...] = DEFAULT_DIR_B
-    use: bool = True
-    sigma_range_m: float = 0.01
-    sigma_floor_m: float = 0.003
-    gate_chi2: float = 10.83
-    step_m: float = 0.06
-    below_m: float = 0.03
-    same_floor_m: float = 0.06
-    snap_m: float = 0.04
-    decide_readings: int = 5
-    decide_after_s: float = 0.15
-    update_in_swing: bool = True
-    hit_memory: int = 12
-    new_level_sigma_m: float = 0.001
-    detector: HeightDetectorParams = field(default_factory=HeightDetectorParams)
-
-
-@dataclass(frozen=True, slots=True)
-class RangeOutputs:
-    """What became of each reading handled in one batch (for the views and the counts).
-
-    Attributes:
-        t_s: (m,) reading time, s.
-        sensor: (m,) sensor index.
-        status: (m,) the unit's status byte.
-        height_m: (m,) the IMU's height above the surface hit, measured through the estimated
-            attitude (NaN when the reading had no range).
-        code: (m,) what was done (:data:`CODE_NAMES`).
-        innovation_m: (m,) innovation against the reference floor (NaN when not computed).
-        floor_z_m: (m,) the reference floor level in force.
-        hit_point_n_m: (m, 3) where the reading's ray hit a floor (x, y) and that surface's height
-            (a known level, else where the ray hit), m; NaN for readings that gave no floor hit.
-        hit_on_level: (m,) the surface height is a known level.
-    """
-
-    t_s: F64
-    sensor: NDArray[np.int64]
-    status: NDArray[np.uint8]
-    height_m: F64
-    code: NDArray[np.int64]
-    innovation_m: F64
-    floor_z_m: F64
-    hit_point_n_m: F64
-    hit_on_level: NDArray[np.bool_]
-
-    def __len__(self) -> int:
-        return int(self.t_s.shape[0])
-
-
-@dataclass
-class TofCounts:
-    """Readings by what became of them, since the start (names of :data:`CODE_NAMES` and, for invalid
-    statuses, of :data:`STATUS_NAMES`), plus ``late`` (applied after the IMU sample of their time)."""
-
-    by_reason: dict[str, int] = field(default_factory=dict)
-
-    def add(self, name: str, n: int = 1) -> None:
-        self.by_reason[name] = self.by_reason.get(name, 0) + n
-
-    def get(self, name: str) -> int:
-        return self.by_reason.get(name, 0)
-
-    @property
-    def total(self) -> int:
-        return sum(v for k, v in self.by_reason.items() if k != "late")
 
 
 class TofAiding:
@@ -289,12 +85,13 @@ class TofAiding:
         self._lever = np.asarray(config.lever_b_m, dtype=np.float64)
         dirs = np.asarray(config.dir_b, dtype=np.float64)
         self._dir = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
-        self._par = np.zeros(tu.N_PAR)
-        self._par[tu.PAR_SIGMA_RANGE] = config.sigma_range_m
-        self._par[tu.PAR_SIGMA_FLOOR] = config.sigma_floor_m
-        self._par[tu.PAR_GATE] = config.gate_chi2
-        self._par[tu.PAR_STEP] = config.step_m
-        self._par[tu.PAR_BELOW] = config.below_m
+        self._par = tu.TofParams(
+            float(config.sigma_range_m),
+            float(config.sigma_floor_m),
+            float(config.gate_chi2),
+            float(config.step_m),
+            float(config.below_m),
+        )
         self._work = np.zeros((2, 15))
         self._res = np.zeros(tu.N_RES)
         self.counts = TofCounts()
@@ -596,20 +393,31 @@ def floor_from_hits(
 ) -> tuple[F64, F64]:
     """The floor under IMU positions from floor hit points (module docstring, "Clearance").
 
-    Args:
-        pos_n_m: (n, 3) IMU positions.
-        hits: (k, 4) hit points: x, y, surface height (a known level, or where the ray hit), 1.0 when
-            the height is a known level, else 0.0.
-        snap_m: hits within this height of each other are on the same surface.
-        default_z_m: the floor when no hit has ``min_support`` hits at its height.
-        swing_origin: where the swing began (x, y); None in stance (the nearest hit's floor then).
-        narrow: narrows a step edge's bracket with edges learned before, or None.
-        min_support: a hit counts when this many hits (itself included) lie within ``snap_m`` of its
-            height.
+    Parameters
+    ----------
+    pos_n_m : ndarray, shape (n, 3)
+        IMU positions, m.
+    hits : ndarray, shape (k, 4)
+        Hit points: x, y, surface height (a known level, or where the ray hit), 1.0 when the height
+        is a known level, else 0.0.
+    snap_m : float
+        Hits within this height of each other are on the same surface.
+    default_z_m : float
+        The floor when no hit has ``min_support`` hits at its height.
+    swing_origin : tuple of float, optional
+        Where the swing began (x, y); None in stance (the nearest hit's floor then).
+    narrow : Narrow, optional
+        Narrows a step edge's bracket with edges learned before, or None.
+    min_support : int
+        A hit counts when this many hits (itself included) lie within ``snap_m`` of its height.
 
-    Returns:
-        (n,) the tread under each position and (n,) the floor height to measure the clearance from
-        (interpolated between the hits on both sides of a step edge).
+    Returns
+    -------
+    tread : ndarray, shape (n,)
+        The tread under each position.
+    floor : ndarray, shape (n,)
+        The floor height to measure the clearance from (interpolated between the hits on both sides
+        of a step edge).
     """
     n = pos_n_m.shape[0]
     dz = np.abs(hits[:, None, 2] - hits[None, :, 2]) <= snap_m

@@ -1,39 +1,39 @@
 """The ToF foot-height measurement: one range reading as a scalar error-state update (compiled).
 
-A sensor at lever arm ``l_b`` from the IMU looks along the unit vector ``u_b`` (body axes) and reads
-range ρ. With the attitude ``R = R(q_nb)`` its ray hits a level floor at height z_f where
+A sensor at lever arm ``l_b`` from the IMU looks along the unit vector ``u_b`` (body axes) and reads range ρ. With
+the attitude ``R = R(q_nb)`` its ray hits a level floor at height z_f where
 
     p_z + (R l_b)_z + ρ (R u_b)_z = z_f,
 
-so the IMU's measured height above the floor is ``h = −(R l_b)_z − ρ (R u_b)_z`` and the predicted one
-``p_z − z_f`` (Merat, Harvey, Mitsis, multi-sensor shoe platform, eqs. 20-21: the height from the range
-through the estimated orientation and the sensor's lever arm). As a measurement of the error state:
+so the IMU's measured height above the floor is ``h = −(R l_b)_z − ρ (R u_b)_z`` and the predicted one ``p_z − z_f``
+(Merat, Harvey, Mitsis, multi-sensor shoe platform, eqs. 20-21: the height from the range through the estimated
+orientation and the sensor's lever arm). As a measurement of the error state:
 
     g(x) = p_z + w_z,  w = R (l_b + ρ u_b)  (the IMU-to-hit-point vector, navigation axes)
     innovation  y = z_f − g(x̂) = h − (p̂_z − z_f)
 
-With the global attitude error of ``footnav.pipeline.navigation.eskf`` (R = Exp(δθ) R̂ ≈ (I + [δθ]×) R̂), ``R v ≈ R̂ v −
-[R̂ v]× δθ`` and the row of the Jacobian is
+With the global attitude error of ``footnav.pipeline.navigation.eskf`` (R = Exp(δθ) R̂ ≈ (I + [δθ]×) R̂),
+``R v ≈ R̂ v − [R̂ v]× δθ`` and the row of the Jacobian is
 
     H = ∂g/∂δx:  δp → (0, 0, 1);  δθ → −e_zᵀ [w]× = (w_y, −w_x, 0);  δv, δb_a, δb_g → 0
 
-(``tests/test_tof_update.py`` checks it against finite differences of g). When the floor is a state
-of the filter (a floor level of ``footnav.pipeline.aiding.tof``, error state ``level``, nominal
-x[level + 1]), z_f is that state and the row has −1 there. The noise is the range
-noise along the vertical plus a floor term, r = (σ_ρ (R̂ u_b)_z)² + σ_f². The update is the scalar
-Joseph form, expanded like ``eskf._update3``: P ← P − K uᵀ − u Kᵀ + K S Kᵀ with u = P Hᵀ, S = H u + r,
-K = u / S; then injection and the covariance reset for the global attitude error (Solà 2017, §7.3).
+(``tests/test_tof_update.py`` checks it against finite differences of g). When the floor is a state of the filter
+(a floor level of ``footnav.pipeline.aiding.tof``, error state ``level``, nominal x[level + 1]), z_f is that state
+and the row has −1 there. The noise is the range noise along the vertical plus a floor term,
+r = (σ_ρ (R̂ u_b)_z)² + σ_f². The update is the scalar Joseph form, expanded like ``_kernels_linalg._update3``:
+P ← P − K uᵀ − u Kᵀ + K S Kᵀ with u = P Hᵀ, S = H u + r, K = u / S; then injection and the covariance reset for
+the global attitude error (Solà 2017, §7.3).
 
-Gating (before anything changes): a range that is not finite, a measured height more than
-``below_m`` under the floor (the estimate must never be pulled through it), an innovation larger
-than ``step_m`` (a step edge: the ray sees another tread than the reference floor) and a normalised
-innovation y²/S above ``gate_chi2`` (an outlier, e.g. a spurious reflection) are rejected with their
-reason code.
+Gating (before anything changes): a range that is not finite, a measured height more than ``below_m`` under the
+floor (the estimate must never be pulled through it), an innovation larger than ``step_m`` (a step edge: the ray
+sees another tread than the reference floor) and a normalised innovation y²/S above ``gate_chi2`` (an outlier,
+e.g. a spurious reflection) are rejected with their reason code. Units SI (m, rad).
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from footnav.pipeline.navigation.eskf import TH0, update1
@@ -45,9 +45,23 @@ F64 = NDArray[np.float64]
 
 # result codes of tof_update
 USED, NOT_FINITE, BELOW_FLOOR, STEP_EDGE, OUTLIER = range(5)
-# layout of the parameter vector
-PAR_SIGMA_RANGE, PAR_SIGMA_FLOOR, PAR_GATE, PAR_STEP, PAR_BELOW = range(5)
-N_PAR = 5
+
+
+class TofParams(NamedTuple):
+    """Parameters of :func:`tof_update` (floats; ``footnav.pipeline.aiding.tof_types.TofConfig``)."""
+
+    sigma_range: float
+    """Range noise, m."""
+    sigma_floor: float
+    """Floor noise (unevenness, the level's own error), m."""
+    gate: float
+    """Normalised innovation squared above which a reading is an outlier."""
+    step: float
+    """Innovation above which the ray sees another tread (a step edge), m."""
+    below: float
+    """Measured height under the floor beyond which a reading is rejected, m."""
+
+
 # layout of the result vector: code, innovation y (m), measured height h (m), floor point z (m),
 # hit point x, y (m), S (m²)
 RES_CODE, RES_Y, RES_H, RES_FLOOR_Z, RES_HIT_X, RES_HIT_Y, RES_S = range(7)
@@ -90,7 +104,7 @@ def tof_update(
     range_m: float,
     floor_z_m: float,
     level: int,
-    par: F64,
+    par: TofParams,
     apply: bool,
     work: F64,
     res: F64,
@@ -114,7 +128,7 @@ def tof_update(
     res[RES_HIT_Y] = py + wy
     y = floor_z_m - g
     res[RES_Y] = y
-    r = (par[PAR_SIGMA_RANGE] * uz) ** 2 + par[PAR_SIGMA_FLOOR] ** 2
+    r = (par.sigma_range * uz) ** 2 + par.sigma_floor**2
     for i in range(n):
         u[i] = P[i, 2] + P[i, TH0] * H[TH0] + P[i, TH0 + 1] * H[TH0 + 1]
     if level >= 0:
@@ -125,13 +139,13 @@ def tof_update(
     if level >= 0:
         s -= u[level]
     res[RES_S] = s
-    if res[RES_H] < -par[PAR_BELOW]:
+    if res[RES_H] < -par.below:
         res[RES_CODE] = BELOW_FLOOR
         return
-    if abs(y) > par[PAR_STEP]:
+    if abs(y) > par.step:
         res[RES_CODE] = STEP_EDGE
         return
-    if y * y / s > par[PAR_GATE]:
+    if y * y / s > par.gate:
         res[RES_CODE] = OUTLIER
         return
     res[RES_CODE] = USED

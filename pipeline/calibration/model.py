@@ -6,39 +6,27 @@ Accelerometer model (per sample, body frame of the sensor, SI units)::
 
 - ``u``: the true specific force (at rest ``|u| = g``), m/s²;
 - ``K = diag(k)``: scale factors (3); ``K_T = diag(k_T)``: their temperature slopes, 1/°C (3);
-- ``L``: lower-triangular with a unit diagonal, ``L[1,0] = l_yx, L[2,0] = l_zx, L[2,1] = l_zy``:
-  misalignment and cross-axis coupling (3). The body frame is *defined* by the sensor's x axis and its
-  xy plane, the usual choice that leaves a rotation-free, identifiable set (Tedaldi et al. 2014);
+- ``L``: lower-triangular with a unit diagonal, ``L[1,0] = l_yx, L[2,0] = l_zx, L[2,1] = l_zy``: misalignment and
+  cross-axis coupling (3); the body frame is defined by the sensor's x axis and its xy plane (Tedaldi et al. 2014);
 - ``b``: bias (3), m/s²; ``b_T``: its temperature slope (3), m/s²/°C; ``w``: noise.
 
-That is the 15-parameter form of the multi-sensor platform paper (after Merat et al.). With no
-reference, only ``|u| = g`` is known on each still face, so each still window's mean is inverted,
-``u_j = (K L + K_T ΔT_j)⁻¹ (y_j − b − b_T ΔT_j)``, and ``Σ_j (|u_j| − g)²`` is minimised over the 15
-parameters with scipy's trust-region-reflective least squares (``method="trf"``). Parameter
-uncertainties are ``σ̂² (JᵀJ)⁻¹`` at the solution (pseudo-inverse by SVD), ``σ̂² = Σ r² / (m − p)``.
+On each still face only ``|u| = g`` is known, so each still window's mean is inverted,
+``u_j = (K L + K_T ΔT_j)⁻¹ (y_j − b − b_T ΔT_j)``, and ``Σ_j (|u_j| − g)²`` is minimised over the 15 parameters
+with scipy's trust-region-reflective least squares (``method="trf"``). Parameter uncertainties are
+``σ̂² (JᵀJ)⁻¹`` at the solution (pseudo-inverse by SVD), ``σ̂² = Σ r² / (m − p)``. Gyroscope: at rest the rate is
+zero (Earth rotation, ≤ 0.0042 °/s, is absorbed in the bias): ``y_g = ω + b_g + b_gT ΔT + w``, fitted by linear
+least squares over the captures. ``t_ref_c`` is the mean temperature of the procedure; a stream without
+temperature (the calibrated-IMU output 0x40) is corrected at ``t_ref_c``.
 
-Gyroscope: at rest the rate is zero (Earth rotation, ≤ 0.0042 °/s, is absorbed in the bias), so the
-bias is the mean of the still windows, with a temperature slope when the temperature moved:
-``y_g = ω + b_g + b_gT ΔT + w``, fitted by linear least squares.
+The fit raises a :class:`CalibrationError` saying what to redo instead of returning parameters it cannot
+determine: too few distinct faces or faces that do not span 3D, motion or saturation within a face, a temperature
+that barely changed (the 9-parameter model without temperature terms is fitted only if the caller allows it, and
+the result says so). Why: the documentation's design page "Calibration".
 
-The fit refuses (a :class:`CalibrationError` saying what to redo) rather than return parameters it
-cannot determine: too few distinct faces or faces that do not span 3D, a temperature that barely
-changed (the temperature terms are then unobservable: the 9-parameter model is fitted only if the caller
-allows it, and the result says so), motion or saturation within a face.
-
-``t_ref_c`` is the mean temperature of the procedure. When a stream carries no temperature (the
-calibrated-IMU output 0x40), :meth:`ImuCalibration.correct` evaluates the model at ``t_ref_c``.
-
-References
-----------
-- Tedaldi, D., Pretto, A., Menegatti, E. (2014). A robust and easy to implement method for IMU
-  calibration without external equipments. *IEEE ICRA*, 3042-3049 (the lower-triangular
-  misalignment, the ``|u| = g`` cost on still periods).
-- Merat, P., et al. (the 15-parameter accelerometer model with K, L, B and temperature terms
-  K_T, B_T, ``Y = K L U + (K_T U + B_T) T + B + w``), as used by the multi-sensor foot platform paper.
-- Branch, M. A., Coleman, T. F., Li, Y. (1999). A subspace, interior, and conjugate gradient method
-  for large-scale bound-constrained minimization problems. *SIAM J. Sci. Comput.* 21(1), 1-23 (the
-  trust-region-reflective "trf" method of ``scipy.optimize.least_squares``).
+References: Tedaldi, Pretto, Menegatti (2014), A robust and easy to implement method for IMU calibration without
+external equipments, *IEEE ICRA*, 3042-3049; Merat, P., et al. (the 15-parameter model with K, L, B and K_T, B_T),
+as used by the multi-sensor foot platform paper; Branch, Coleman, Li (1999), *SIAM J. Sci. Comput.* 21(1), 1-23
+(the "trf" method of ``scipy.optimize.least_squares``).
 """
 
 from __future__ import annotations
@@ -119,12 +107,18 @@ class IllDeterminedError(CalibrationError):
 class FaceCapture:
     """One still capture, reduced to window means.
 
-    Attributes:
-        acc_win_mps2: (m, 3) mean specific force of each window, m/s².
-        gyr_win_radps: (m, 3) mean angular rate of each window, rad/s.
-        temp_win_c: (m,) mean temperature of each window, °C (NaN: no temperature in the stream).
-        n_samples: samples averaged.
-        acc_noise_mps2: per-sample acceleration standard deviation about the window means (max axis).
+    Attributes
+    ----------
+    acc_win_mps2
+        (m, 3) mean specific force of each window, m/s².
+    gyr_win_radps
+        (m, 3) mean angular rate of each window, rad/s.
+    temp_win_c
+        (m,) mean temperature of each window, °C (NaN: no temperature in the stream).
+    n_samples
+        Samples averaged.
+    acc_noise_mps2
+        Per-sample acceleration standard deviation about the window means (max axis).
     """
 
     acc_win_mps2: F64
@@ -260,18 +254,30 @@ def forward_model(theta: F64, u_mps2: F64, dtemp_c: F64) -> F64:
 class ImuCalibration:
     """A fitted calibration: accelerometer model θ, gyroscope bias, their 1σ, and fit quality.
 
-    Attributes:
-        theta: (15,) accelerometer parameters in :data:`PARAM_NAMES` order.
-        theta_sigma: (15,) their 1σ (0 for parameters held fixed).
-        temperature_model: False when K_T, b_T were held at 0 (temperature unobservable or absent).
-        t_ref_c: reference temperature, °C (mean over the procedure; NaN without temperature).
-        gyr_bias_radps: (3,) gyroscope bias at ``t_ref_c``, rad/s.
-        gyr_bias_sigma_radps: (3,) its 1σ.
-        gyr_bias_slope_radps_per_c: (3,) temperature slope of the gyroscope bias (0 if not fitted).
-        residual_rms_mps2: RMS of ``|u_j| − g`` over the windows, m/s².
-        n_faces: distinct faces used; n_windows: residuals.
-        gravity_mps2: the ``g`` the fit assumed.
-        face_residual_rms_mps2: (n_faces,) per-face RMS residual (quality of each face).
+    Attributes
+    ----------
+    theta
+        (15,) accelerometer parameters in :data:`PARAM_NAMES` order.
+    theta_sigma
+        (15,) their 1σ (0 for parameters held fixed).
+    temperature_model
+        False when K_T, b_T were held at 0 (temperature unobservable or absent).
+    t_ref_c
+        Reference temperature, °C (mean over the procedure; NaN without temperature).
+    gyr_bias_radps
+        (3,) gyroscope bias at ``t_ref_c``, rad/s.
+    gyr_bias_sigma_radps
+        (3,) its 1σ.
+    gyr_bias_slope_radps_per_c
+        (3,) temperature slope of the gyroscope bias (0 if not fitted).
+    residual_rms_mps2
+        RMS of ``|u_j| − g`` over the windows, m/s².
+    n_faces, n_windows
+        Distinct faces used; residuals.
+    gravity_mps2
+        The ``g`` the fit assumed.
+    face_residual_rms_mps2
+        (n_faces,) per-face RMS residual (quality of each face).
     """
 
     theta: F64
@@ -363,8 +369,10 @@ class ImuCalibration:
     def from_dict(cls, d: dict[str, Any]) -> ImuCalibration:
         """Inverse of :meth:`to_dict`.
 
-        Raises:
-            CalibrationError: another model version or a malformed entry.
+        Raises
+        ------
+        CalibrationError
+            Another model version or a malformed entry.
         """
         if d.get("model_version") != MODEL_VERSION:
             raise CalibrationError(

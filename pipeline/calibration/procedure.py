@@ -53,14 +53,20 @@ EventKind = Literal["still", "captured", "moved", "seen", "rejected", "done", "f
 class ProcedureEvent:
     """Something the user should hear about.
 
-    Attributes:
-        kind: ``still`` (capture started), ``captured`` (a new face), ``moved`` (motion during a
-            capture), ``seen`` (a face captured before), ``rejected`` (saturation or motion found in
-            the capture), ``done`` (the fit is well determined), ``failed`` (it cannot be).
-        t_s: device time of the event, s.
-        message: one line for the terminal.
-        face: the capture (``captured``), else None.
-        calibration: the fit (``done``), else None.
+    Attributes
+    ----------
+    kind
+        ``still`` (capture started), ``captured`` (a new face), ``moved`` (motion during a capture), ``seen`` (a face
+        captured before), ``rejected`` (saturation or motion found in the capture), ``done`` (the fit is well
+        determined), ``failed`` (it cannot be).
+    t_s
+        device time of the event, s.
+    message
+        one line for the terminal.
+    face
+        the capture (``captured``), else None.
+    calibration
+        the fit (``done``), else None.
     """
 
     kind: EventKind
@@ -73,13 +79,20 @@ class ProcedureEvent:
 class FaceCollector:
     """Collect still faces from a stream and fit when they determine the calibration.
 
-    Args:
-        rate_hz: sample rate, Hz.
-        capture_s: still time averaged per face, s.
-        settle_s: still time required before a capture starts, s.
-        max_faces: stop (``failed``) after this many faces without a well-determined fit.
-        allow_no_temperature: fit the 9-parameter model if the temperature is unobservable.
-        gravity_mps2: local gravity for the fit.
+    Parameters
+    ----------
+    rate_hz
+        sample rate, Hz.
+    capture_s
+        still time averaged per face, s.
+    settle_s
+        still time required before a capture starts, s.
+    max_faces
+        stop (``failed``) after this many faces without a well-determined fit.
+    allow_no_temperature
+        fit the 9-parameter model if the temperature is unobservable.
+    gravity_mps2
+        local gravity for the fit.
     """
 
     def __init__(
@@ -239,8 +252,10 @@ class FaceCollector:
     def finish(self) -> ImuCalibration:
         """The fit from the faces so far (when the stream ends before ``done``).
 
-        Raises:
-            CalibrationError: what to redo (too few faces, temperature, not determined).
+        Raises
+        ------
+        CalibrationError
+            what to redo (too few faces, temperature, not determined).
         """
         if self.calibration is not None:
             return self.calibration

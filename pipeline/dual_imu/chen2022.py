@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from footnav.pipeline.dual_imu import dense_kf as kf_dense
@@ -63,8 +64,6 @@ F64 = NDArray[np.float64]
 N_STATE = 12
 R1, R2, V1, V2 = 0, 3, 6, 9
 
-(PAR_SIG_ACC, PAR_REL_POS, PAR_REL_VEL, PAR_ZUPT, PAR_G, PAR_ACC_FS, PAR_GYR_FS) = range(7)
-N_PAR = 7
 CNT_BAD1, CNT_BAD2, CNT_BOTH_BAD, CNT_SWING_UPDATES, CNT_STANCE_UPDATES = range(5)
 N_CNT = 5
 
@@ -73,12 +72,18 @@ N_CNT = 5
 class PaperConfig:
     """Settings of the reconstructed paper filter.
 
-    Attributes:
-        profile: accelerometer noise and motion noise (the same profile as the other filters).
-        sigma_rel_pos_m: 1σ of eq. 18/19 ``r₂ − r₁ = C m``, m.
-        sigma_rel_vel_mps: 1σ of eq. 18 ``v₂ − v₁ = C (ω̄ × m)``, m/s.
-        sigma_zupt_mps: 1σ of eq. 19 ``v_i = 0``, m/s.
-        align_s: still time at the start used for alignment and gyro-bias calibration, s.
+    Attributes
+    ----------
+    profile
+        accelerometer noise and motion noise (the same profile as the other filters).
+    sigma_rel_pos_m
+        1σ of eq. 18/19 ``r₂ − r₁ = C m``, m.
+    sigma_rel_vel_mps
+        1σ of eq. 18 ``v₂ − v₁ = C (ω̄ × m)``, m/s.
+    sigma_zupt_mps
+        1σ of eq. 19 ``v_i = 0``, m/s.
+    align_s
+        still time at the start used for alignment and gyro-bias calibration, s.
     """
 
     profile: UnitProfile = field(default_factory=lambda: get_profile("generic"))
@@ -92,17 +97,28 @@ class PaperConfig:
 class DualTrack:
     """What a dual-IMU filter returns (per sample).
 
-    Attributes:
-        pos1_n_m: (n, 3) IMU 1's position, the filter's best estimate from both IMUs, m.
-        pos_imu_n_m: (n, 2, 3) each IMU's own position track, m.
-        vel1_n_mps: (n, 3) IMU 1's velocity, m/s.
-        quat_nb_wxyz: (n, 4) board attitude.
-        residual_pos_m: (n, 3) position-constraint residual (NaN where none was formed), m.
-        residual_vel_mps: (n, 3) velocity/rate-constraint residual (NaN where none), m/s or rad/s.
-        nis: (n,) NIS of the constraint residual (NaN where none).
-        imu_ok: (n, 2) whether each IMU's sample was used.
-        counters: named counts (bad samples per IMU, updates).
-        messages: plain-language report of unusable IMU samples (empty when there were none).
+    Attributes
+    ----------
+    pos1_n_m
+        (n, 3) IMU 1's position, the filter's best estimate from both IMUs, m.
+    pos_imu_n_m
+        (n, 2, 3) each IMU's own position track, m.
+    vel1_n_mps
+        (n, 3) IMU 1's velocity, m/s.
+    quat_nb_wxyz
+        (n, 4) board attitude.
+    residual_pos_m
+        (n, 3) position-constraint residual (NaN where none was formed), m.
+    residual_vel_mps
+        (n, 3) velocity/rate-constraint residual (NaN where none), m/s or rad/s.
+    nis
+        (n,) NIS of the constraint residual (NaN where none).
+    imu_ok
+        (n, 2) whether each IMU's sample was used.
+    counters
+        named counts (bad samples per IMU, updates).
+    messages
+        plain-language report of unusable IMU samples (empty when there were none).
     """
 
     pos1_n_m: F64
@@ -117,6 +133,25 @@ class DualTrack:
     messages: tuple[str, ...] = ()
 
 
+class PaperFilterParams(NamedTuple):
+    """Parameters of :func:`run_paper_filter` (all floats; built by :func:`paper_parameters`)."""
+
+    sig_acc: float
+    """Specific-force noise per sample of one IMU (white noise at the rate and motion noise), m/s²."""
+    rel_pos: float
+    """1σ of eq. 18/19 ``r₂ − r₁ = C m``, m."""
+    rel_vel: float
+    """1σ of eq. 18 ``v₂ − v₁ = C (ω̄ × m)``, m/s."""
+    zupt: float
+    """1σ of eq. 19 ``v_i = 0``, m/s."""
+    g: float
+    """Local gravity, m/s²."""
+    acc_full_scale: float
+    """Specific force at or above which an accelerometer reading is saturated, m/s²."""
+    gyr_full_scale: float
+    """Angular rate at or above which a gyroscope reading is saturated, rad/s."""
+
+
 @njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 def run_paper_filter(
     x: F64,
@@ -128,7 +163,7 @@ def run_paper_filter(
     dt_s: F64,
     stance: NDArray[np.bool_],
     lever_b_m: F64,
-    par: F64,
+    par: PaperFilterParams,
     out_x: F64,
     out_quat: F64,
     out_res: F64,
@@ -136,13 +171,43 @@ def run_paper_filter(
     out_ok: NDArray[np.bool_],
     counters: NDArray[np.int64],
 ) -> None:
-    """The filter loop over n samples; ``x`` (12,), ``P`` (12, 12), ``quat`` (4,) updated in place.
+    """The filter loop over n samples; ``x``, ``P``, ``quat`` and ``counters`` are updated in place.
 
-    ``acc``, ``gyr``: (n, 2, 3); ``gyr_bias`` (2, 3); ``out_x`` (n, 12); ``out_res`` (n, 6) =
-    [r₂ − r₁ − C m, v₂ − v₁ − C (ω̄ × m)] before the update (NaN when not formed); ``out_nis`` (n,).
+    Parameters
+    ----------
+    x : ndarray, shape (12,)
+        State [r₁, r₂, v₁, v₂], m and m/s.
+    P : ndarray, shape (12, 12)
+        Its covariance.
+    quat : ndarray, shape (4,)
+        Board attitude q_nb (w, x, y, z).
+    gyr_bias : ndarray, shape (2, 3)
+        Each gyroscope's bias, rad/s.
+    acc, gyr : ndarray, shape (n, 2, 3)
+        IMU 1 and IMU 2 specific force, m/s², and angular rate, rad/s.
+    dt_s : ndarray, shape (n,)
+        Interval before each sample, s (not positive or not finite: no propagation).
+    stance : ndarray of bool, shape (n,)
+        Zero-velocity detector output.
+    lever_b_m : ndarray, shape (3,)
+        IMU 2's position in IMU 1's axes, m.
+    par : PaperFilterParams
+        Noise and constants.
+    out_x : ndarray, shape (n, 12)
+        Output: state after each sample.
+    out_quat : ndarray, shape (n, 4)
+        Output: attitude after each sample.
+    out_res : ndarray, shape (n, 6)
+        Output: [r₂ − r₁ − C m, v₂ − v₁ − C (ω̄ × m)] before the update, m and m/s (NaN where not formed).
+    out_nis : ndarray, shape (n,)
+        Output: NIS of the constraint update (NaN where none).
+    out_ok : ndarray of bool, shape (n, 2)
+        Output: whether each IMU's sample was usable.
+    counters : ndarray of int64, shape (N_CNT,)
+        Counts, incremented (``CNT_*``).
     """  # pragma: no cover
     n = acc.shape[0]
-    g = par[PAR_G]
+    g = par.g
     m0, m1, m2 = lever_b_m[0], lever_b_m[1], lever_b_m[2]
     F = np.eye(N_STATE)
     for i in range(6):
@@ -164,8 +229,8 @@ def run_paper_filter(
     cwm = np.empty(3)
     for k in range(n):
         dt = dt_s[k]
-        ok0 = sample_ok(acc[k, 0], gyr[k, 0], par[PAR_ACC_FS], par[PAR_GYR_FS])
-        ok1 = sample_ok(acc[k, 1], gyr[k, 1], par[PAR_ACC_FS], par[PAR_GYR_FS])
+        ok0 = sample_ok(acc[k, 0], gyr[k, 0], par.acc_full_scale, par.gyr_full_scale)
+        ok1 = sample_ok(acc[k, 1], gyr[k, 1], par.acc_full_scale, par.gyr_full_scale)
         out_ok[k, 0], out_ok[k, 1] = ok0, ok1
         if not ok0:
             counters[CNT_BAD1] += 1
@@ -218,7 +283,7 @@ def run_paper_filter(
                     x[6 + 3 * i + c] += a[i, c] * dt
             for i in range(6):
                 F[i, 6 + i] = dt
-            sa2 = par[PAR_SIG_ACC] ** 2
+            sa2 = par.sig_acc**2
             # input noise: each IMU's acceleration error enters r and v (diagonal approximation of Q)
             for i in range(6):
                 q_diag[i] = 0.25 * dt**4 * sa2
@@ -243,7 +308,7 @@ def run_paper_filter(
                 H[c, R2 + c] = 1.0
                 y[c] = cm[c] - (x[R2 + c] - x[R1 + c])
                 out_res[k, c] = -y[c]
-                r[c] = par[PAR_REL_POS] ** 2
+                r[c] = par.rel_pos**2
             nis = kf_dense.update3(dx, P, H, y, r, work)
             if stance[k]:
                 counters[CNT_STANCE_UPDATES] += 1
@@ -252,7 +317,7 @@ def run_paper_filter(
                     for c in range(3):
                         H[c, s0 + c] = 1.0
                         y[c] = -(x[s0 + c] + dx[s0 + c])
-                        r[c] = par[PAR_ZUPT] ** 2
+                        r[c] = par.zupt**2
                     kf_dense.update3(dx, P, H, y, r, work)
             elif ok0 and ok1:
                 counters[CNT_SWING_UPDATES] += 1
@@ -262,7 +327,7 @@ def run_paper_filter(
                     H[c, V2 + c] = 1.0
                     y[c] = cwm[c] - ((x[V2 + c] + dx[V2 + c]) - (x[V1 + c] + dx[V1 + c]))
                     out_res[k, 3 + c] = -(cwm[c] - (x[V2 + c] - x[V1 + c]))
-                    r[c] = par[PAR_REL_VEL] ** 2
+                    r[c] = par.rel_vel**2
                 nis += kf_dense.update3(dx, P, H, y, r, work)
             out_nis[k] = nis
             for i in range(N_STATE):
@@ -273,18 +338,33 @@ def run_paper_filter(
             out_quat[k, i] = quat[i]
 
 
-def paper_parameters(config: PaperConfig, rate_hz: float, gravity_mps2: float) -> F64:
-    """Parameter vector of :func:`run_paper_filter`."""
+def paper_parameters(config: PaperConfig, rate_hz: float, gravity_mps2: float) -> PaperFilterParams:
+    """Parameters of :func:`run_paper_filter`.
+
+    Parameters
+    ----------
+    config : PaperConfig
+        The filter's settings (noise profile and constraint noise).
+    rate_hz : float
+        Sample rate, Hz.
+    gravity_mps2 : float
+        Local gravity, m/s².
+
+    Returns
+    -------
+    PaperFilterParams
+        The filter's parameters.
+    """
     prof = config.profile
-    par = np.zeros(N_PAR)
-    par[PAR_SIG_ACC] = math.hypot(prof.acc_noise_mps2_rthz * math.sqrt(rate_hz), prof.motion_acc_mps2)
-    par[PAR_REL_POS] = config.sigma_rel_pos_m
-    par[PAR_REL_VEL] = config.sigma_rel_vel_mps
-    par[PAR_ZUPT] = config.sigma_zupt_mps
-    par[PAR_G] = gravity_mps2
-    par[PAR_ACC_FS] = ACC_FULL_SCALE_MPS2
-    par[PAR_GYR_FS] = GYR_FULL_SCALE_RADPS
-    return par
+    return PaperFilterParams(
+        sig_acc=math.hypot(prof.acc_noise_mps2_rthz * math.sqrt(rate_hz), prof.motion_acc_mps2),
+        rel_pos=float(config.sigma_rel_pos_m),
+        rel_vel=float(config.sigma_rel_vel_mps),
+        zupt=float(config.sigma_zupt_mps),
+        g=float(gravity_mps2),
+        acc_full_scale=float(ACC_FULL_SCALE_MPS2),
+        gyr_full_scale=float(GYR_FULL_SCALE_RADPS),
+    )
 
 
 def run_paper(

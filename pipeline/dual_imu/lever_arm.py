@@ -52,17 +52,28 @@ F64 = NDArray[np.float64]
 class LeverArmCheck:
     """Result of :func:`check_lever_arm`.
 
-    Attributes:
-        configured_b_m: (3,) the lever arm that was checked, m.
-        estimated_b_m: (3,) least-squares lever arm from the data, m.
-        estimated_sigma_b_m: (3,) its 1σ, m.
-        window_t_s: (w,) end time of each swing window, s.
-        window_nis: (w,) NIS summed over each window.
-        window_bound: (w,) the χ² ``1 − alpha`` quantile of each window.
-        nis: (n,) per-sample NIS (NaN where not formed: stance, slow rotation, a bad sample).
-        flagged_fraction: share of windows above their bound.
-        distance2: ``d²`` of the least-squares arm from the configured one (module docstring).
-        consistent: the configured lever arm agrees with the data (True when nothing could be tested).
+    Attributes
+    ----------
+    configured_b_m
+        (3,) the lever arm that was checked, m.
+    estimated_b_m
+        (3,) least-squares lever arm from the data, m.
+    estimated_sigma_b_m
+        (3,) its 1σ, m.
+    window_t_s
+        (w,) end time of each swing window, s.
+    window_nis
+        (w,) NIS summed over each window.
+    window_bound
+        (w,) the χ² ``1 − alpha`` quantile of each window.
+    nis
+        (n,) per-sample NIS (NaN where not formed: stance, slow rotation, a bad sample).
+    flagged_fraction
+        share of windows above their bound.
+    distance2
+        ``d²`` of the least-squares arm from the configured one (module docstring).
+    consistent
+        the configured lever arm agrees with the data (True when nothing could be tested).
     """
 
     configured_b_m: F64

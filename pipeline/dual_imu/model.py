@@ -32,8 +32,10 @@ def sample_ok(f: F64, w: F64, acc_fs: float, gyr_fs: float) -> bool:  # pragma: 
 def still_window(acc_b_mps2: F64, gyr_b_radps: F64, rate_hz: float, align_s: float) -> slice:
     """The first ``align_s`` of the record, checked to be still (both IMUs' rates under 0.3 rad/s).
 
-    Raises:
-        ValueError: the record is shorter, or the unit moves or an IMU is not finite in it.
+    Raises
+    ------
+    ValueError
+        the record is shorter, or the unit moves or an IMU is not finite in it.
     """
     need = max(2, round(align_s * rate_hz))
     if acc_b_mps2.shape[0] < need:

@@ -27,8 +27,9 @@ from footnav.pipeline.dual_imu.board_eskf import (
 )
 from footnav.pipeline.dual_imu.model import ACC_FULL_SCALE_MPS2, GYR_FULL_SCALE_RADPS
 from footnav.pipeline.nav_types import NavBatch
+from footnav.pipeline.navigation.batches import zupt_ratio
 from footnav.pipeline.navigation.eskf import sample_intervals
-from footnav.pipeline.navigation.navigator import NavStats, zupt_ratio
+from footnav.pipeline.navigation.navigator import NavStats
 from footnav.pipeline.stance.detectors import DetectorParams, StreamingDetector
 from footnav.pipeline.stance.levels import StanceLevelParams, StanceLevels
 from numpy.typing import NDArray
@@ -67,15 +68,21 @@ class TwoImuSamples(Protocol):
 class DualNavConfig:
     """Settings of the dual-IMU navigator.
 
-    Attributes:
-        filter: the dual-IMU filter's settings (profile, alignment time, initial uncertainty).
-        detector: zero-velocity detector settings.
-        lever_b_m: IMU 2's position in IMU 1's axes, m.
-        align_max_rate_radps: quiet for alignment means |ω| below this on both IMUs, rad/s.
-        max_wait_s: unaligned data kept while waiting for a still period, s.
-        stance_levels: apply the stance height constraint of the single-IMU navigator
-            (``footnav.pipeline.stance.levels``) to the board's midpoint, its levels constants (the dual
-            filter's state has a fixed size).
+    Attributes
+    ----------
+    filter
+        the dual-IMU filter's settings (profile, alignment time, initial uncertainty).
+    detector
+        zero-velocity detector settings.
+    lever_b_m
+        IMU 2's position in IMU 1's axes, m.
+    align_max_rate_radps
+        quiet for alignment means |ω| below this on both IMUs, rad/s.
+    max_wait_s
+        unaligned data kept while waiting for a still period, s.
+    stance_levels
+        apply the stance height constraint of the single-IMU navigator (``footnav.pipeline.stance.levels``) to the
+        board's midpoint, its levels constants (the dual filter's state has a fixed size).
     """
 
     filter: DualEskfConfig = field(default_factory=DualEskfConfig)
@@ -89,9 +96,12 @@ class DualNavConfig:
 class DualNavigator:
     """Causal dual-IMU navigation over a stream of two-IMU batches (module docstring).
 
-    Args:
-        config: settings.
-        rate_hz: nominal sample rate, Hz.
+    Parameters
+    ----------
+    config
+        settings.
+    rate_hz
+        nominal sample rate, Hz.
     """
 
     def __init__(self, config: DualNavConfig, rate_hz: float) -> None:

@@ -32,15 +32,25 @@ MIN_STEP_M = 0.05  # GT Silicon's apps count a step only from 5 cm (protocol-ope
 class Steps:
     """Per-step output, m steps.
 
-    Attributes:
-        t_s: (m,) time of each epoch (end of stance), s.
-        index: (m,) sample index of each epoch in the navigation solution.
-        dpos_step_m: (m, 3) displacement since the previous epoch in the previous epoch's heading
-            frame (x forward along that heading, z up), m.
-        dyaw_rad: (m,) heading change since the previous epoch, wrapped to (−π, π].
-        cov: (m, 4, 4) covariance of (dx, dy, dz, dψ), m² and rad².
-        is_step: (m,) displacement of at least 5 cm (False: standing still).
-        pos_n_m: (m, 3) position at the epoch; yaw_rad: (m,) heading at the epoch.
+    Attributes
+    ----------
+    t_s
+        (m,) time of each epoch (end of stance), s.
+    index
+        (m,) sample index of each epoch in the navigation solution.
+    dpos_step_m
+        (m, 3) displacement since the previous epoch in the previous epoch's heading frame (x forward along that
+        heading, z up), m.
+    dyaw_rad
+        (m,) heading change since the previous epoch, wrapped to (−π, π].
+    cov
+        (m, 4, 4) covariance of (dx, dy, dz, dψ), m² and rad².
+    is_step
+        (m,) displacement of at least 5 cm (False: standing still).
+    pos_n_m
+        (m, 3) position at the epoch.
+    yaw_rad
+        (m,) heading at the epoch.
     """
 
     t_s: F64
@@ -78,11 +88,22 @@ def step_epochs(
 def segment_steps(t_s: F64, pos_n_m: F64, quat_nb_wxyz: F64, stance: NDArray[np.bool_], cov_pos_yaw: F64) -> Steps:
     """Steps of a navigation solution.
 
-    Args:
-        t_s: (n,) time, s; pos_n_m: (n, 3); quat_nb_wxyz: (n, 4); stance: (n,).
-        cov_pos_yaw: (n, 4, 4) covariance of (x, y, z, ψ) per sample.
+    Parameters
+    ----------
+    t_s
+        (n,) time, s.
+    pos_n_m
+        (n, 3).
+    quat_nb_wxyz
+        (n, 4).
+    stance
+        (n,).
+    cov_pos_yaw
+        (n, 4, 4) covariance of (x, y, z, ψ) per sample.
 
-    Returns:
+    Returns
+    -------
+    Steps
         One entry per epoch after the first (the first epoch is the start of the solution).
     """
     idx = step_epochs(t_s, stance)

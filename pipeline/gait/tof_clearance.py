@@ -19,20 +19,14 @@ counts here only with :data:`MIN_SUPPORT` hits at its height: with 10 % reflecti
 cm, a swing's window holds about 9 of them, about 1.6 within ±4 cm of any height, and 5 or more
 others with about 2 % odds, while a tread the IMU passes over gets tens of hits.
 
-Measured on the emulated stairs (``footnav experiment tof``, seeds 1-8): clearance RMS 1.02-1.39 cm
-live, 0.86-0.94 cm from the whole swing; with 20 % time-outs and 10 % reflections (the bad-input
-test's sensors) 3.0-5.4 cm live, 2.1-4.4 cm from the whole swing. Choosing :data:`MIN_SUPPORT`
-(before the floor levels were filter states, walks 1-5 with the bad-input sensors): 4.80-5.89 cm
-counting a hit with one other agreeing, 2.24-3.72 cm with 6 (clean walks unchanged up to 10, worse
-from 14). Looked up among the hits within ±30 ms of each sample instead of the swing's: 1.14-1.59 cm,
-±100 ms 0.93 cm (seed 1); narrowing the brackets with the edges learned on other passes, as live,
-made it worse (1.01 cm at ±100 ms, seed 1), so it is not done.
+Why :data:`MIN_SUPPORT` and the whole swing: docs/design/tof-aiding.md.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from footnav.pipeline.aiding.tof import RangeOutputs, floor_from_hits
+from footnav.pipeline.aiding.tof import floor_from_hits
+from footnav.pipeline.aiding.tof_types import RangeOutputs
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]

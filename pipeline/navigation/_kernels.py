@@ -153,8 +153,8 @@ def _predict(
     ``_predict`` then ``_correct`` (at stance samples that are not bad) are :func:`run_filter_kernel`'s
     loop body, operation for operation, for the smoother's storing pass
     (``footnav.pipeline.smoothing.rts``; ``tests/test_smoother.py`` checks that both give
-    bit-identical states and covariances). The batch loop does not call them: inlined there, numba
-    compiled it about 20 % slower.
+    bit-identical states and covariances). The batch loop repeats their body instead of calling them
+    (why: the documentation's design page "Estimator").
 
     Returns
     -------

@@ -25,11 +25,14 @@ G_MIN_MPS2, G_MAX_MPS2 = 9.0, 10.6  # plausible |f| at rest on Earth, allowing f
 class Alignment:
     """Result of the coarse alignment.
 
-    Attributes:
-        quat_nb_wxyz: (4,) initial attitude (yaw 0).
-        gravity_mps2: |mean specific force| over the still window (gravity plus the accelerometer's
-            bias along it).
-        gyr_bias_radps: (3,) mean angular rate over the window (the foot is still).
+    Attributes
+    ----------
+    quat_nb_wxyz
+        (4,) initial attitude (yaw 0).
+    gravity_mps2
+        |mean specific force| over the still window (gravity plus the accelerometer's bias along it).
+    gyr_bias_radps
+        (3,) mean angular rate over the window (the foot is still).
     """
 
     quat_nb_wxyz: F64
@@ -45,8 +48,10 @@ class Alignment:
 def align_from_still(acc_b_mps2: F64, gyr_b_radps: F64) -> Alignment:
     """Coarse alignment from (n, 3) samples of a still unit.
 
-    Raises:
-        InputFormatError: the mean specific force is not about 1 g (wrong units or not at rest).
+    Raises
+    ------
+    InputFormatError
+        the mean specific force is not about 1 g (wrong units or not at rest).
     """
     f = acc_b_mps2.mean(axis=0)
     g = float(np.linalg.norm(f))

@@ -10,21 +10,21 @@ before the first quiet period cannot be navigated and are counted, not guessed.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 from footnav.pipeline.aiding.baro import PressureAltimeter, PressureAltitude, PressureBatch
-from footnav.pipeline.aiding.tof import RangeBatch, RangeOutputs, TofAiding, TofConfig
-from footnav.pipeline.gait.clearance import StrideClearance, StrideClearanceTracker
+from footnav.pipeline.aiding.tof import TofAiding
+from footnav.pipeline.aiding.tof_types import RangeBatch, RangeOutputs, TofConfig
+from footnav.pipeline.gait.clearance import StrideClearanceTracker
 from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.navigation import eskf
 from footnav.pipeline.navigation.alignment import Alignment, align_from_still
+from footnav.pipeline.navigation.batches import clip_variance, implausible_to_nan, nav_batch, zupt_ratio
 from footnav.pipeline.navigation.params import FilterParams
 from footnav.pipeline.navigation.profiles import G0_MPS2, UnitProfile, get_profile
-from footnav.pipeline.navigation.saturation import clipped_rate_variance
 from footnav.pipeline.samples import ImuBatch
 from footnav.pipeline.stance.detectors import DetectorParams, StreamingDetector
 from footnav.pipeline.stance.height_detector import HeightStanceDetector
@@ -33,20 +33,14 @@ from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]
 
-# χ²(3) at 95 %: reject zero-angular-rate updates of a rotating foot. A validation gate of 95 or 99 %
-# (Bar-Shalom, Li, Kirubarajan, "Estimation with Applications to Tracking and Navigation", 2001,
-# §5.4.3); a planted foot pivoting about its vertical (turning on the spot, slow walking) rotates at
-# a few °/s, just above the ZARU's noise, and every accepted sample drags the gyro bias towards that
-# rate. Measured on the real recordings: PyShoe ARMSE-2D mean / median 0.081 / 0.069 m at 99 %,
-# 0.078 / 0.065 m at 95 %, the closed loops and the emulated walks unchanged; tighter still (75 %)
-# helps PyShoe further but from 50 % on the OpenShoe loop's heading degrades.
 DEFAULT_DT_MAX_S = 0.05
 """Intervals this long or longer are gaps in the stream (50 samples at 1 kHz, 10 at 200 Hz)."""
 ZARU_GATE_CHI2_3DOF = 7.815
+"""χ²(3) at 95 %: the gate of the zero-angular-rate update, which rejects the samples of a rotating foot
+(Bar-Shalom, Li, Kirubarajan, "Estimation with Applications to Tracking and Navigation", 2001, §5.4.3)."""
 ZUPT_GATE_NIS = 100.0
 """A zero-velocity sample the detector is unsure of is skipped when its NIS exceeds this (10σ: the
-foot is moving; ``footnav.pipeline.navigation.eskf``). 100-300 measured alike on the recordings; 50 costs the running
-PyShoe trial 0.013 m of ARMSE-2D (0.156 → 0.169 m)."""
+foot is moving; ``footnav.pipeline.navigation.eskf``)."""
 ZUPT_GATE_RATIO = 0.5
 """Unsure: the detector's statistic above this share of its threshold (T/γ > 0.5)."""
 STANDING_AFTER_S = 2.0
@@ -61,32 +55,41 @@ rad/s."""
 class NavConfig:
     """Everything the navigator needs besides the samples.
 
-    Attributes:
-        profile: the unit's noise model (``footnav.pipeline.navigation.profiles``).
-        detector: zero-velocity detector settings.
-        align_s: continuous quiet time needed for the initial alignment, s.
-        align_max_rate_radps: quiet means |ω| below this at every sample of the window, rad/s.
-        align_max_acc_dev_mps2: and | |f| − mean |f| | below this, m/s².
-        dt_max_s: intervals this long or longer are gaps in the stream, counted and integrated as
-            this long (``eskf.sample_intervals``), s.
-        init_pos_sigma_m, init_vel_sigma_mps: initial 1σ of position and velocity.
-        init_tilt_sigma_rad, init_yaw_sigma_rad: initial 1σ of roll/pitch and of yaw.
-        max_wait_s: how much unaligned data to keep while waiting for a still period, s.
-        stance_levels: apply the stance height constraint (``footnav.pipeline.stance.levels``: a stance on the
-            floor of the last one is at its height; height changes of a stair or more are kept).
-            With ToF readings their own floor levels (``footnav.pipeline.aiding.tof``) take its place.
-        gravity_mps2: the magnitude of gravity where the unit walks, m/s² (standard gravity by default:
-            within 0.27 % of the value anywhere at sea level, 9.780 at the equator to 9.832 at the
-            poles in the WGS 84 model, Groves 2013 ch. 2). The accelerometer's
-            reading at rest differs from it by its bias, which the filter then estimates: taking |f̄| of
-            the still start for gravity instead (0 or less here, as before 2026-12) hides the bias
-            along gravity in g, where the filter's bias states cannot see it, and turns it into an
-            unmodelled error as soon as the foot tilts (README "Accuracy", the consistency paragraph).
-        step_smoothing: a live session (and its replay) also shows each step smoothed once it has
-            ended (``footnav.pipeline.smoothing.stepwise``; its causal filter holds the stance levels as constants).
-            Off by default: it costs a live session of two feet at 1 kHz about 3 % of a core and an
-            hour's replay about half its time again (README "Accuracy"). The :class:`Navigator`
-            itself is causal only: ``step_smoother.make_navigator`` picks the class.
+    Attributes
+    ----------
+    profile
+        the unit's noise model (``footnav.pipeline.navigation.profiles``).
+    detector
+        zero-velocity detector settings.
+    align_s
+        continuous quiet time needed for the initial alignment, s.
+    align_max_rate_radps
+        quiet means |ω| below this at every sample of the window, rad/s.
+    align_max_acc_dev_mps2
+        and | |f| − mean |f| | below this, m/s².
+    dt_max_s
+        intervals this long or longer are gaps in the stream, counted and integrated as this long
+        (``eskf.sample_intervals``), s.
+    init_pos_sigma_m, init_vel_sigma_mps
+        initial 1σ of position and velocity.
+    init_tilt_sigma_rad, init_yaw_sigma_rad
+        initial 1σ of roll/pitch and of yaw.
+    max_wait_s
+        how much unaligned data to keep while waiting for a still period, s.
+    stance_levels
+        apply the stance height constraint (``footnav.pipeline.stance.levels``: a stance on the floor of the last one is
+        at its height; height changes of a stair or more are kept). With ToF readings their own floor levels
+        (``footnav.pipeline.aiding.tof``) take its place.
+    gravity_mps2
+        the magnitude of gravity where the unit walks, m/s² (standard gravity by default: within 0.27 % of the value
+        anywhere at sea level, 9.780 at the equator to 9.832 at the poles in the WGS 84 model, Groves 2013 ch. 2). The
+        accelerometer's reading at rest differs from it by its bias, which the filter then estimates. 0 or less takes
+        |f̄| of the still start for gravity instead (docs/design/estimator.md says why that is not the default).
+    step_smoothing
+        a live session (and its replay) also shows each step smoothed once it has ended
+        (``footnav.pipeline.smoothing.stepwise``; its causal filter holds the stance levels as constants). Off by
+        default for its cost (docs/design/smoothing.md). The :class:`Navigator` itself is causal only:
+        ``footnav.app.feet.foot_run`` picks the class.
     """
 
     profile: UnitProfile = field(default_factory=lambda: get_profile("mpu6500x4"))
@@ -220,10 +223,14 @@ class Navigator:
     already navigated (it arrived in a later read than that sample) is applied before the next
     sample and counted as ``late``. Without readings the batch runs in one call, as fast as before.
 
-    Args:
-        config: filter, detector and profile settings.
-        rate_hz: nominal sample rate (sizes the detector window and the process noise).
-        tof: ToF sensor mounting and aiding settings (default :class:`TofConfig`).
+    Parameters
+    ----------
+    config
+        filter, detector and profile settings.
+    rate_hz
+        nominal sample rate (sizes the detector window and the process noise).
+    tof
+        ToF sensor mounting and aiding settings (default :class:`TofConfig`).
     """
 
     def __init__(self, config: NavConfig, rate_hz: float, tof: TofConfig | None = None) -> None:
@@ -489,87 +496,6 @@ class Navigator:
             due.t_s, due.sensor, due.status, heights, codes, innov, floors, hits[:, :3], hits[:, 3] == 1.0
         )
         return floor_z, floor_c, outputs
-
-
-def nav_batch(
-    batch: ImuBatch,
-    pos: F64,
-    vel: F64,
-    quat: F64,
-    cov_pos_yaw: F64,
-    stat: F64,
-    threshold: F64,
-    still: NDArray[np.bool_],
-    *,
-    floor_z_m: F64 | None = None,
-    ranges: RangeOutputs | None = None,
-    clearance_m: F64 | None = None,
-    strides: StrideClearance | None = None,
-    altitude: PressureAltitude | None = None,
-) -> NavBatch:
-    """The :class:`NavBatch` of ``batch``'s samples from the filter's per-sample outputs.
-
-    Clearance is the height above ``floor_z_m`` (n,) when the floor under the IMU is known (ToF),
-    else above the floor the walk started on (z = 0), unless given as ``clearance_m``.
-    """
-    if clearance_m is None:
-        clearance_m = pos[:, 2].copy() if floor_z_m is None else pos[:, 2] - floor_z_m
-    return NavBatch(
-        t_s=batch.t_s,
-        pos_n_m=pos,
-        vel_n_mps=vel,
-        quat_nb_wxyz=quat,
-        pos_cov_n_m2=cov_pos_yaw[:, :3, :3],
-        stance=still,
-        detector_stat=stat,
-        detector_threshold=threshold,
-        clearance_m=clearance_m,
-        host_ns=batch.host_ns,
-        cov_pos_yaw=cov_pos_yaw,
-        floor_z_m=floor_z_m,
-        ranges=ranges,
-        strides=strides,
-        altitude=altitude,
-    )
-
-
-NO_CLIPPED_RATES = np.empty((0, 3))
-"""``eskf.run_filter``'s clipped-rate variance when no sample is marked clipped."""
-
-
-def clip_variance(batch: ImuBatch) -> F64:
-    """The body-axis rate variance of ``batch``'s clipped samples (``footnav.pipeline.navigation.saturation``) as
-    ``eskf.run_filter`` takes it: (n, 3), or (0, 3) when none is marked."""
-    if batch.gyr_clipped_b is None or not batch.gyr_clipped_b.any():
-        return NO_CLIPPED_RATES
-    return clipped_rate_variance(batch.gyr_b_radps, batch.gyr_clipped_b)
-
-
-def zupt_ratio(stat: F64, threshold: F64) -> F64:
-    """The detector's statistic over its threshold, T/γ (n,), contiguous, as ``eskf.run_filter``
-    takes it (the vertical noise of each zero-velocity update, ``footnav.pipeline.navigation.eskf``)."""
-    return np.ascontiguousarray(stat / threshold, dtype=np.float64)
-
-
-MAX_ABS_ACC_MPS2 = 2000.0
-"""|specific force| no foot IMU can report (about 200 g: full scales are ±16-18 g, e.g. MPU-6500,
-ADIS16367, 3DM-GX3 datasheets); a larger value is a corrupt sample."""
-MAX_ABS_GYR_RADPS = 100.0
-"""|angular rate| no foot IMU can report (about 5700 °/s: full scales are ±1200-2000 °/s)."""
-
-
-def implausible_to_nan(batch: ImuBatch) -> ImuBatch:
-    """``batch`` with samples no sensor can report (corrupt records: a flipped exponent bit) set to
-    NaN, so the detector and the filter skip and count them as bad samples instead of integrating
-    them (the same object when there are none)."""
-    bad = (np.abs(batch.acc_b_mps2) > MAX_ABS_ACC_MPS2).any(axis=1) | (
-        np.abs(batch.gyr_b_radps) > MAX_ABS_GYR_RADPS
-    ).any(axis=1)
-    if not bad.any():
-        return batch
-    acc, gyr = batch.acc_b_mps2.copy(), batch.gyr_b_radps.copy()
-    acc[bad], gyr[bad] = np.nan, np.nan
-    return dataclasses.replace(batch, acc_b_mps2=acc, gyr_b_radps=gyr)
 
 
 def _first_run(mask: NDArray[np.bool_], length: int) -> int:

@@ -17,33 +17,44 @@ G0_MPS2 = 9.80665  # standard gravity (CGPM 1901); the navigator's default gravi
 class UnitProfile:
     """Noise model of one kind of unit, continuous-time densities in SI units.
 
-    Attributes:
-        name: profile key.
-        acc_noise_mps2_rthz: accelerometer white noise density (velocity random walk), m/s²/√Hz.
-        gyr_noise_radps_rthz: gyroscope white noise density (angle random walk), rad/s/√Hz.
-        acc_bias_rw_mps3_rthz: accelerometer bias random walk density, m/s³/√Hz.
-        gyr_bias_rw_radps2_rthz: gyroscope bias random walk density, rad/s²/√Hz.
-        acc_bias_init_mps2: 1σ turn-on accelerometer bias left after calibration, m/s².
-        gyr_bias_init_radps: 1σ turn-on gyroscope bias left after calibration, rad/s.
-        motion_acc_mps2: extra process noise on specific force covering vibration, quantisation
-            and unmodelled high-frequency foot dynamics (1σ per sample), m/s². Foot-mounted
-            filters inflate this well above the sensor noise (OpenShoe uses 0.7 m/s², pyshoe 0.5);
-            here part of that moves into the signal-proportional term below.
-        motion_gyr_radps: likewise for angular rate, rad/s (OpenShoe 0.3°/s, pyshoe 0.5°/s).
-        zupt_sigma_mps: zero-velocity pseudo-measurement 1σ, m/s (OpenShoe 0.1, pyshoe 0.01).
-        zaru_sigma_radps: zero-angular-rate pseudo-measurement 1σ during stance, rad/s: the
-            residual rotation of a standing foot, added to the sensor noise to weigh the update (its
-            χ² gate tests against the sensor noise alone, ``footnav.pipeline.navigation.eskf``).
-        acc_scale_error, gyr_scale_error: 1σ of the error proportional to the signal (scale factor,
-            cross-axis sensitivity, acc/gyro timing), as a fraction; process noise grows by it.
-        roll_lever_m: distance from the IMU to the point the foot rolls about during stance (heel,
-            toe), m; the ZUPT noise grows by this times the angular rate (see ``footnav.pipeline.navigation.eskf``).
-        zupt_vertical_sigma_mps: σ_T, the extra 1σ of the ZUPT's vertical component where the
-            detector's statistic reaches its threshold; it scales as √(T/γ) below it (see
-            ``footnav.pipeline.navigation.eskf``: the heel pad and sole still compress as stance begins). Measured
-            with 0.1, 0.15, 0.2 and 0.3 m/s (README "Accuracy"): each
-            lowers the PyShoe mean ATE-3D, both closed loops' 3D error and the emulated walks' end
-            errors; 0.2 m/s balances them. 0 gives the hard update of before.
+    Attributes
+    ----------
+    name
+        profile key.
+    acc_noise_mps2_rthz
+        accelerometer white noise density (velocity random walk), m/s²/√Hz.
+    gyr_noise_radps_rthz
+        gyroscope white noise density (angle random walk), rad/s/√Hz.
+    acc_bias_rw_mps3_rthz
+        accelerometer bias random walk density, m/s³/√Hz.
+    gyr_bias_rw_radps2_rthz
+        gyroscope bias random walk density, rad/s²/√Hz.
+    acc_bias_init_mps2
+        1σ turn-on accelerometer bias left after calibration, m/s².
+    gyr_bias_init_radps
+        1σ turn-on gyroscope bias left after calibration, rad/s.
+    motion_acc_mps2
+        extra process noise on specific force covering vibration, quantisation and unmodelled high-frequency foot
+        dynamics (1σ per sample), m/s². Foot-mounted filters inflate this well above the sensor noise (OpenShoe uses
+        0.7 m/s², pyshoe 0.5); here part of that moves into the signal-proportional term below.
+    motion_gyr_radps
+        likewise for angular rate, rad/s (OpenShoe 0.3°/s, pyshoe 0.5°/s).
+    zupt_sigma_mps
+        zero-velocity pseudo-measurement 1σ, m/s (OpenShoe 0.1, pyshoe 0.01).
+    zaru_sigma_radps
+        zero-angular-rate pseudo-measurement 1σ during stance, rad/s: the residual rotation of a standing foot, added to
+        the sensor noise to weigh the update (its χ² gate tests against the sensor noise alone,
+        ``footnav.pipeline.navigation.eskf``).
+    acc_scale_error, gyr_scale_error
+        1σ of the error proportional to the signal (scale factor, cross-axis sensitivity, acc/gyro timing), as a
+        fraction; process noise grows by it.
+    roll_lever_m
+        distance from the IMU to the point the foot rolls about during stance (heel, toe), m; the ZUPT noise grows by
+        this times the angular rate (see ``footnav.pipeline.navigation.eskf``).
+    zupt_vertical_sigma_mps
+        σ_T, the extra 1σ of the ZUPT's vertical component where the detector's statistic reaches its threshold; it
+        scales as √(T/γ) below it (see ``footnav.pipeline.navigation.eskf``: the heel pad and sole still compress as
+        stance begins). 0 gives the hard update (docs/design/estimator.md).
     """
 
     name: str

@@ -1,45 +1,27 @@
 """Gyroscope samples cut off at the sensor's measurement range: found, reconstructed, and marked
 uncertain (offline).
 
-A foot's pitch rate at toe-off and in the swing reaches 500-1000 °/s when walking fast and more when
-running, beyond the range of many foot units. A saturated gyroscope reports its limit instead of
-the rate, so the strapdown integration loses part of the swing's rotation: the attitude is wrong by
-tens of degrees·ms per saturated stretch, and the velocity (and the heading, which no zero-velocity
-update can see) with it. The MicroStrain 3DM-GX3-25 of the PyShoe VICON trials, for example, holds
-−519 to −526 °/s for 40-50 ms at a time on its pitch axis in five of the nine trials here.
+A saturated gyroscope reports its limit instead of the rate, so the strapdown integration loses part of the swing's
+rotation; a foot's pitch rate reaches 500-1000 °/s at toe-off and in the swing when walking fast, beyond the range
+of many foot units.
 
-**Which axes clip.** No datasheet states the level a unit's calibrated output clips at (it depends
-on the unit's own calibration), so it is found in the recording itself, which is why all of this
-needs the whole recording and runs on whole recordings (``footnav.app.commands.export.navigate_recording``: export,
-evaluation), not in the live navigator. A range cuts every swing that exceeds it at the same value,
-so an axis clips in one direction when several separate swings share its extreme (at least
-``PILE_MIN_SWINGS`` stretches, 20 ms apart or more, come within 2 % of it; an unclipped axis's
-extreme is one swing's peak: at most three swings came that close on the recordings here that never
-clip, 6-52 on the directions that do) or when one swing holds it (within 2 % for ``PLATEAU_MIN_S``;
-the smooth peaks of those recordings stay that close for at most 28 ms, 42 ms on an axis far below
-the largest rate), and that extreme is within ``CLIP_LEVEL_SHARE`` of the largest rate any axis of
-the recording reaches (a range limits every axis alike; a slower axis can hold a pose). Measured on
-the recordings beside the project: it finds the GX3-25's pitch axis in the five trials that reach it
-(−521 to −526 °/s), in the running trial its pitch and yaw axes both ways (522 to 537 °/s), and a
-roll direction in two walking trials (−552 °/s, and a single 55 ms plateau at 547-555 °/s); nothing
-on the OpenShoe and x-io loops or the three slow 2018 trials.
+**Which axes clip.** The level a unit's calibrated output clips at is found in the recording itself, so this runs
+on whole recordings (``footnav.app.commands.export.navigate_recording``: export, evaluation), not in the live
+navigator. A direction (an axis, one sign) clips when its extreme is within ``CLIP_LEVEL_SHARE`` of the largest rate
+of any axis of the recording and either at least ``PILE_MIN_SWINGS`` separate stretches (``SWING_GAP_S`` apart or
+more) come within ``PILE_NEAR`` of it, or one stretch stays that close for ``PLATEAU_MIN_S``.
 
-**Reconstruction.** Each stretch of a clipped direction within ``fraction`` of its extreme is
-replaced by the quadratic fitted (least squares) through the ``neighbours`` samples on each side
-of it, where that quadratic is larger in magnitude than the measurement and has its sign (the
-quadratic approximation of saturated inertial data of Dang and Suh, "Sensor saturation compensated
-smoothing algorithm for inertial sensor based motion tracking", Sensors 14(5), 8167-8188, 2014,
-doi:10.3390/s140508167). Magnitudes only grow: below its limit a sensor reads the rate.
+**Reconstruction.** Each stretch of a clipped direction within ``fraction`` of its extreme is replaced by the
+quadratic fitted (least squares) through the ``neighbours`` samples on each side of it, where that quadratic is
+larger in magnitude than the measurement and has its sign; magnitudes only grow (Dang and Suh, "Sensor saturation
+compensated smoothing algorithm for inertial sensor based motion tracking", Sensors 14(5), 8167-8188, 2014,
+doi:10.3390/s140508167).
 
-**Uncertainty.** What the clipped samples really read is not known, reconstructed or not (the
-GX3-25 filters its output after clipping internally, so the flanks of a stretch are clipped too and
-the fit often stays under the plateau). The filter is told so: each clipped sample carries rate
-noise of 1σ = ``CLIPPED_RATE_SIGMA_SHARE`` × its rate along its own body axis
-(:func:`clipped_rate_variance`, ``footnav.pipeline.navigation.eskf``), so the attitude error a clipped stretch leaves
-lies about that axis, mostly the foot's pitch axis, a tilt that the next stance's zero-velocity
-updates see and correct together with the velocity and position error it made in the swing. Noise
-on every axis instead (the rate-proportional gyroscope noise raised on those samples) also lets
-those updates turn the heading, which nothing observes, and was worse (README "Accuracy").
+**Uncertainty.** Each clipped sample carries rate noise of 1σ = ``CLIPPED_RATE_SIGMA_SHARE`` × its rate along its
+own body axis (:func:`clipped_rate_variance`, added to the attitude block of Q by
+``footnav.pipeline.navigation.eskf``), so the attitude error a clipped stretch leaves lies about that axis, a tilt
+that the next stance's zero-velocity updates see and correct. Rates in rad/s, body axes; times in s. Why this
+design, with its measurements: the documentation's design page "Estimator", section on clipped gyroscope rates.
 """
 
 from __future__ import annotations
@@ -66,19 +48,21 @@ PLATEAU_MIN_S = 0.04
 CLIP_LEVEL_SHARE = 0.9
 """... and its extreme is within 10 % of the largest rate on any axis of the recording."""
 CLIPPED_RATE_SIGMA_SHARE = 0.15
-"""1σ of a clipped sample's rate error, as a share of its (reconstructed) rate: the quadratic
-reconstruction raises the PyShoe unit's clipped stretches by up to 25 %. Measured 0.1-0.5 (README
-"Accuracy"): 0.1-0.2 alike on the recordings that clip, 0.3 and 0.5 worse; the middle is taken."""
+"""1σ of a clipped sample's rate error, as a share of its (reconstructed) rate (design page "Estimator")."""
 
 
 @dataclass(frozen=True, slots=True)
 class SaturatedRates:
     """Angular rates with their clipped samples found and reconstructed.
 
-    Attributes:
-        gyr_b_radps: (n, 3) rates, reconstructed where clipped, rad/s.
-        clipped_b: (n, 3) the samples (rows) and axes (columns) taken as clipped.
-        reconstructed: how many values the reconstruction changed.
+    Attributes
+    ----------
+    gyr_b_radps
+        (n, 3) rates, reconstructed where clipped, rad/s.
+    clipped_b
+        (n, 3) the samples (rows) and axes (columns) taken as clipped.
+    reconstructed
+        How many values the reconstruction changed.
     """
 
     gyr_b_radps: F64
@@ -121,12 +105,22 @@ def reconstruct_saturated_rates(
 ) -> SaturatedRates:
     """Find the clipped samples of a whole recording and reconstruct them (module docstring).
 
-    Args:
-        t_s: (n,) sample times, s (the abscissa of the fit; duplicates and jitter are allowed).
-        gyr_b_radps: (n, 3) angular rate as measured; not modified.
-        fraction: a stretch is a run of samples of a clipped direction with ω ≥ fraction · extreme.
-        neighbours: samples on each side used for the fit; a stretch at the start or end of the
-            recording with fewer than three usable neighbours in all is left as it is (still marked).
+    Parameters
+    ----------
+    t_s : ndarray, shape (n,)
+        Sample times, s (the abscissa of the fit; duplicates and jitter are allowed).
+    gyr_b_radps : ndarray, shape (n, 3)
+        Angular rate as measured, rad/s; not modified.
+    fraction : float
+        A stretch is a run of samples of a clipped direction with ω ≥ fraction · extreme.
+    neighbours : int
+        Samples on each side used for the fit; a stretch at the start or end of the recording with
+        fewer than three usable neighbours in all is left as it is (still marked).
+
+    Returns
+    -------
+    SaturatedRates
+        The reconstructed rates, the clipped samples and how many values changed.
     """
     out = np.array(gyr_b_radps, dtype=np.float64, copy=True)
     n = out.shape[0]

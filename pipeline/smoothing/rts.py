@@ -1,28 +1,12 @@
-"""Rauch–Tung–Striebel smoothing of a whole recording (replay and evaluation only, never live).
+"""Rauch–Tung–Striebel smoothing of a whole recording (replay, export and evaluation only, never live).
 
-The live filter (``footnav.pipeline.navigation.navigator``, ``footnav.pipeline.navigation.eskf.run_filter``) is
-causal: the estimate at a
-sample uses the samples up to it. For replay, export (``footnav export --smooth``) and evaluation the
-whole recording is known, and a fixed-interval smoother uses every sample for every estimate; between
-two stances it spreads the velocity error the second stance reveals back over the swing instead of
-letting it show as a jump at the heel strike. This module does not change the causal filter: it
-reuses it and adds a backward pass.
-
-**Forward.** ``smooth_recording`` runs the causal ``Navigator`` itself (same detector, same adaptive
-threshold and stance flags, same alignment period, start sample, initial state and covariance, same
-parameters: nothing is duplicated). The only difference is that the navigator is handed the
-recording in segments of ``segment_samples`` and the nominal state x̂ and covariance P are kept at the
-start of each segment (a *checkpoint*); the filter is sequential, so this gives bit-for-bit the
-causal result.
-
-**Backward** (Rauch, Tung, Striebel, AIAA J. 3(8), 1965), over the segments from the last one: each
-segment is filtered again from its checkpoint by ``_storing_pass``, which runs ``run_filter``'s step
-operation for operation (``eskf._predict``, ``eskf._correct``; ``tests/test_smoother.py`` checks that
-it reproduces the causal states and covariances bit for bit; the stance height updates run between
-its calls, from Python as in the navigator, so that both run the same compiled update) and keeps per
-sample what the backward pass needs: the filtered nominal x̂_k and P_k (after the updates), the
-predicted nominal x̂⁻_k and P⁻_k, and the propagation Jacobian F_k as (f_n, R, dt)
-(``eskf._propagate_cov``'s blocks). Then, for k from the end down:
+**Forward.** ``smooth_recording`` runs the causal ``Navigator`` itself, handed the recording in segments of
+``segment_samples``, keeping the nominal state x̂ and covariance P at the start of each (a *checkpoint*).
+**Backward** (Rauch, Tung, Striebel, AIAA J. 3(8), 1965), from the last segment: each is filtered again from its
+checkpoint by ``_storing_pass`` (``run_filter``'s step, operation for operation, bit for bit:
+``tests/test_smoother.py``; the stance height updates between its calls, from Python, as in the navigator),
+keeping per sample the filtered x̂_k, P_k, the predicted x̂⁻_k, P⁻_k and F_k as (f_n, R, dt)
+(``_kernels._propagate_cov``'s blocks). Then, for k from the end down:
 
     C_k      = P_k F_{k+1}ᵀ (P⁻_{k+1})⁻¹
     δ⁻_{k+1} = x^s_{k+1} ⊖ x̂⁻_{k+1}                   smoothed error against the *predicted* nominal
@@ -31,31 +15,19 @@ predicted nominal x̂⁻_k and P⁻_k, and the propagation Jacobian F_k as (f_n,
     P^s_k    = P_k + C_k (P̃_{k+1} − P⁻_{k+1}) C_kᵀ
     x^s_k    = x̂_k ⊕ δ^s_k
 
-The error-state form with resets: the filter's error at k+1 is measured from the corrected nominal
-x̂_{k+1}, while F_{k+1} and P⁻_{k+1} describe the error from the predicted one x̂⁻_{k+1}; so the smoothed
-state is re-expressed against x̂⁻_{k+1} (``⊖``: differences for p, v and the biases, and for the global
-attitude error δθ = Log(q^s ⊗ q̂⁻*), exactly), which is x^s ⊖ x̂⁻ = δ^s_{k+1} + (x̂_{k+1} ⊖ x̂⁻_{k+1}) to
-first order, and its covariance is taken back through the inverse of the filter's reset Jacobian,
-J = I − [ĉ/2]× on the attitude block with ĉ = Log(q̂_{k+1} ⊗ q̂⁻*_{k+1}) the attitude correction
-applied at k+1 (Solà, "Quaternion kinematics for the error-state Kalman filter", 2017, §7.3; the
-filter applies G = I + [ĉ/2]×). A sample without propagation (Δt ≤ 0) has F = I, Q = 0, so there
-x^s_k = x^s_{k+1} and P^s_k = P̃_{k+1}. At the last sample the smoothed solution is the filtered one.
+The error-state form with resets: the filter's error at k+1 is measured from the corrected nominal x̂_{k+1}, while
+F_{k+1} and P⁻_{k+1} describe the error from the predicted one, so the smoothed state is re-expressed against
+x̂⁻_{k+1} (``⊖``: differences for p, v and the biases, and δθ = Log(q^s ⊗ q̂⁻*) for the global attitude error,
+exactly), which is x^s ⊖ x̂⁻ = δ^s_{k+1} + (x̂_{k+1} ⊖ x̂⁻_{k+1}) to first order, and its covariance is taken back
+through the inverse of the filter's reset Jacobian, J = I − [ĉ/2]× on the attitude block with
+ĉ = Log(q̂_{k+1} ⊗ q̂⁻*_{k+1}) the attitude correction applied at k+1 (Solà, "Quaternion kinematics for the
+error-state Kalman filter", 2017, §7.3; the filter applies G = I + [ĉ/2]×). Without propagation (Δt ≤ 0) F = I,
+Q = 0: x^s_k = x^s_{k+1}, P^s_k = P̃_{k+1}. At the last sample the smoothed solution is the filtered one. C_k comes
+from a Cholesky solve of P⁻_{k+1} scaled to a unit diagonal (about 9 000 multiply-adds per sample, compiled).
 
-C_k is computed by a Cholesky solve of P⁻_{k+1} after scaling it to a unit diagonal (the states
-differ by many orders of magnitude in variance), not by an explicit inverse. Per sample the backward
-pass costs about 9 000 multiply-adds (a 15×15 Cholesky factorisation, 15 triangular solves, and
-C (P̃ − P⁻) Cᵀ on one triangle); the loops are compiled with numba and allocate nothing per sample.
-
-**Memory.** The backward pass needs P_k and P⁻_k of every sample (about 4 KB per sample with x̂,
-x̂⁻ and F), which for 10 minutes at 1 kHz would be 2.4 GB. Instead of windows (which would cut the
-smoother's information at their edges) the segments are filtered a second time from their checkpoints
-while going backwards (checkpointing), so the smoother is exact for any length and its working
-memory is fixed: one segment's buffers (``segment_samples`` × 3.9 KB, 16 MB at the default 4096)
-plus one checkpoint per segment (1.9 KB each). Beyond that it needs what the causal ``navigate``
-needs anyway (the samples, the detector's arrays and the per-sample output, into which the smoothed
-solution is written in place): measured peak 350 B per sample for both, 210 MB for 10 minutes at
-1 kHz. The price is a second forward pass, a fraction of the backward pass's cost: 10 minutes at
-1 kHz smooth in about 4 s on one core (``navigate`` alone: 1.2 s).
+**Memory** is fixed for any length: one segment's buffers (:data:`BYTES_PER_BUFFERED_SAMPLE`, about 3.9 KB, per
+sample) plus one checkpoint per segment (1.9 KB). Units SI; frames as in ``footnav.pipeline.navigation.eskf``.
+Why checkpointing, with its measurements: the documentation's design page "Smoothing".
 """
 
 from __future__ import annotations
@@ -67,6 +39,7 @@ import numpy as np
 from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.navigation import eskf
 from footnav.pipeline.navigation._kernels import _correct, _predict, track_stance
+from footnav.pipeline.navigation.batches import clip_variance, nav_batch, zupt_ratio
 from footnav.pipeline.navigation.eskf import (
     BA0,
     BG0,
@@ -79,7 +52,7 @@ from footnav.pipeline.navigation.eskf import (
     rotate_attitude_block,
     sample_intervals,
 )
-from footnav.pipeline.navigation.navigator import NavConfig, Navigator, NavStats, clip_variance, nav_batch, zupt_ratio
+from footnav.pipeline.navigation.navigator import NavConfig, Navigator, NavStats
 from footnav.pipeline.navigation.params import FilterParams
 from footnav.pipeline.navigation.quaternion import quat_from_rotvec_s, quat_mul_s
 from footnav.pipeline.samples import ImuBatch
@@ -219,7 +192,7 @@ def _error_vs_predicted(xs: F64, xp: F64, k1: int, dp: F64) -> None:  # pragma: 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _f_times_p(Pf: F64, k: int, fn: F64, Rm: F64, dt: float, k1: int, B: F64) -> None:  # pragma: no cover
-    """B = F_{k+1} P_k (rows of p, v, θ change; ``eskf._propagate_cov``'s row operations)."""
+    """B = F_{k+1} P_k (rows of p, v, θ change; ``_kernels._propagate_cov``'s row operations)."""
     s = -dt
     f0, f1, f2 = fn[k1, 0], fn[k1, 1], fn[k1, 2]
     for j in range(N_STATE):
@@ -428,8 +401,7 @@ def store_span(
     (k, z) of ``level_updates`` (``level_at`` their k, sorted) for a ≤ k < stop applied after sample k.
 
     The run is split after each update's sample: the update runs here, from Python, as in the
-    navigator, so both run the same compiled code (inlined into the pass, LLVM fused its arithmetic
-    differently once the pass came from numba's cache)."""
+    navigator, so both run the same compiled code (design page "Smoothing")."""
     xf, Pf = buffers[0], buffers[1]
     lo = a
     for j in range(bisect.bisect_left(level_at, a), bisect.bisect_left(level_at, stop)):
@@ -497,11 +469,13 @@ def smooth_recording(
     ``pos_cov_n_m2`` and ``clearance_m`` are the smoothed ones. The last sample equals the causal
     solution. None, as from ``navigate``, when the recording never stands still long enough to align.
 
-    Args:
-        segment_samples: samples per checkpointed segment: bounds the working memory to about
-            ``BYTES_PER_BUFFERED_SAMPLE`` (3.9 KB) times this; the result does not depend on it.
-        gyr_clipped_b: (n, 3) the rates marked clipped (``footnav.pipeline.navigation.saturation``), as for
-        ``navigate``.
+    Parameters
+    ----------
+    segment_samples : int
+        Samples per checkpointed segment: bounds the working memory to about
+        ``BYTES_PER_BUFFERED_SAMPLE`` (3.9 KB) times this; the result does not depend on it.
+    gyr_clipped_b : ndarray of bool, shape (n, 3), optional
+        The rates marked clipped (``footnav.pipeline.navigation.saturation``), as for ``navigate``.
     """
     if segment_samples < 1:
         raise ValueError("segment_samples must be at least 1")

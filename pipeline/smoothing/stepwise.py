@@ -6,8 +6,7 @@ instead of bending back over the swing. The whole-recording smoother (``footnav.
 that back, but needs the recording's end. On a foot-mounted INS almost all it gains comes from the
 next stance alone: the position and heading are not observable to zero-velocity updates, so what a
 stance tells about earlier samples is mostly the velocity, tilt and bias errors of the swing just
-before it (measured on the PyShoe trials: causal 0.067 m ARMSE-2D, smoothed step by step 0.060,
-smoothed whole 0.059; README "Accuracy"). So the samples since the last step are smoothed when the
+before it (docs/design/smoothing.md). So the samples since the last step are smoothed when the
 next stance has lasted ``close_after_s`` (or ended, if shorter), conditioned on the data up to then:
 a track one step (about a second) behind the foot, while the causal one stays as it was
 (Colomar, Nilsson, Händel, "Smoothing for ZUPT-aided INSs", IPIN 2012; Suh, Park, "A smoother for
@@ -25,14 +24,13 @@ pass reproduces the causal filter bit for bit (``tests/test_step_smoother.py``),
 result is the whole-recording smoother's on the recording cut at b.
 
 Sessions ask for it with ``--step-smoothing`` or ``[filter] step_smoothing`` (``NavConfig.step_smoothing``,
-:func:`make_navigator`); it is off by default for its cost (README "Accuracy": an hour's replay takes
-about two thirds longer, a live session a few per cent of a core more, within the noise).
+``footnav.app.feet.foot_run``); it is off by default for its cost.
 
 A window longer than ``max_window_s`` (a long stance, a foot that never stands) is closed there, to
 bound the memory the backward pass needs (about 3.9 KB per sample of a window). The stance height
 levels are constants here (``StanceLevelParams.level_states = 0``: the passes store the 15 error
-states), as in the whole-recording smoother; on the recordings this changes the causal figures by
-less than 0.1 mm. ToF aiding adds floor states, so a ToF unit is navigated without step smoothing.
+states), as in the whole-recording smoother. ToF aiding adds floor states, so a ToF unit is
+navigated without step smoothing.
 """
 
 from __future__ import annotations
@@ -41,7 +39,7 @@ import dataclasses
 from typing import cast
 
 import numpy as np
-from footnav.pipeline.aiding.tof import RangeBatch, TofConfig
+from footnav.pipeline.aiding.tof_types import RangeBatch, TofConfig
 from footnav.pipeline.nav_types import NavBatch, SmoothedSpan
 from footnav.pipeline.navigation import eskf
 from footnav.pipeline.navigation.navigator import NavConfig, Navigator, NavStats
@@ -70,12 +68,17 @@ class StepSmoothingNavigator(Navigator):
     ToF readings add floor states to the filter, which the smoothing passes do not store: the first
     one (:meth:`add_ranges`) ends the smoothing, and the navigator goes on as a causal one.
 
-    Args:
-        config, rate_hz, tof: as for :class:`Navigator`.
-        close_after_s: stance time after which a window closes, s.
-        max_window_s: longest window, s.
-        with_covariance: also smooth the covariance (``SmoothedSpan.cov_pos_yaw``); it costs most of
-            the work (``smoother._backward_pass``), so live sessions go without.
+    Parameters
+    ----------
+    config, rate_hz, tof
+        as for :class:`Navigator`.
+    close_after_s
+        stance time after which a window closes, s.
+    max_window_s
+        longest window, s.
+    with_covariance
+        also smooth the covariance (``SmoothedSpan.cov_pos_yaw``); it costs most of the work
+        (``smoother._backward_pass``), so live sessions go without.
     """
 
     def __init__(

@@ -42,22 +42,33 @@ DETECTOR_KINDS: tuple[DetectorKind, ...] = ("shoe", "amv", "amag", "are")
 class DetectorParams:
     """Zero-velocity detector settings.
 
-    Attributes:
-        kind: which statistic (see the module docstring).
-        window_s: window length in seconds (W = max(2, round(window_s · rate))).
-        sigma_acc_mps2: accelerometer scale σa in the statistic, m/s².
-        sigma_gyr_radps: gyroscope scale σg, rad/s.
-        gravity_mps2: g in the statistic.
-        adaptive: adapt the threshold to the stream (module docstring); else use ``threshold``.
-        threshold: γ when fixed, and the starting value of the adaptive threshold. With the default
-            scales, 25 admits |ω| up to 0.1 rad/s or a specific-force deviation of 0.5 m/s² alone;
-            sensor noise of MEMS foot units gives T ≈ 0.1-1 at rest.
-        history_s, update_s, margin_decades, motion_decades: the adaptive rule.
-        min_threshold, max_threshold: bounds of the adaptive threshold (T units).
-        min_stance_s: the statistic must stay near the threshold this long before a sample below it
-            counts as stance (causal; see ``StreamingDetector._debounce``).
-        stance_hysteresis_decades: "near" for that debounce: below the threshold times
-            10^stance_hysteresis_decades (a factor 1.26 by default).
+    Attributes
+    ----------
+    kind
+        which statistic (see the module docstring).
+    window_s
+        window length in seconds (W = max(2, round(window_s · rate))).
+    sigma_acc_mps2
+        accelerometer scale σa in the statistic, m/s².
+    sigma_gyr_radps
+        gyroscope scale σg, rad/s.
+    gravity_mps2
+        g in the statistic.
+    adaptive
+        adapt the threshold to the stream (module docstring); else use ``threshold``.
+    threshold
+        γ when fixed, and the starting value of the adaptive threshold. With the default scales, 25 admits |ω| up to
+        0.1 rad/s or a specific-force deviation of 0.5 m/s² alone; sensor noise of MEMS foot units gives T ≈ 0.1-1 at
+        rest.
+    history_s, update_s, margin_decades, motion_decades
+        the adaptive rule.
+    min_threshold, max_threshold
+        bounds of the adaptive threshold (T units).
+    min_stance_s
+        the statistic must stay near the threshold this long before a sample below it counts as stance (causal; see
+        ``StreamingDetector._debounce``).
+    stance_hysteresis_decades
+        "near" for that debounce: below the threshold times 10^stance_hysteresis_decades (a factor 1.26 by default).
     """
 
     kind: DetectorKind = "shoe"
@@ -207,15 +218,22 @@ def _statistic_kernel(
 def statistic(acc_b_mps2: F64, gyr_b_radps: F64, window: int, p: DetectorParams) -> F64:
     """The detector statistic for every full window of a batch.
 
-    Args:
-        acc_b_mps2: (n, 3) specific force.
-        gyr_b_radps: (n, 3) angular rate.
-        window: W samples.
-        p: which statistic, its noise scales and gravity.
+    Parameters
+    ----------
+    acc_b_mps2
+        (n, 3) specific force.
+    gyr_b_radps
+        (n, 3) angular rate.
+    window
+        W samples.
+    p
+        which statistic, its noise scales and gravity.
 
-    Returns:
-        (n − W + 1,) statistic; element i belongs to the window ending at sample i + W − 1. A window
-        holding a non-finite sample gets +inf (never still).
+    Returns
+    -------
+    F64
+        (n − W + 1,) statistic; element i belongs to the window ending at sample i + W − 1. A window holding a
+        non-finite sample gets +inf (never still).
     """
     n = acc_b_mps2.shape[0]
     if n < window:

@@ -42,15 +42,20 @@ HEIGHT_MODES: tuple[HeightMode, ...] = ("inertial", "height", "and", "or")
 class HeightDetectorParams:
     """Settings of the height-aided zero-velocity detector (module docstring).
 
-    Attributes:
-        mode: how it combines with the inertial detector.
-        rate_threshold: γ_ω on the angular-rate energy (σ_g = ``sigma_gyr_radps``); 25 admits |ω| up to
-            5 σ_g = 0.1 rad/s.
-        sigma_gyr_radps: σ_g, rad/s.
-        window_s: window of the angular-rate energy, s.
-        max_height_m: δ_h, largest height above rest still counted as down, m (three times the
-            range noise of one reading).
-        hold_s: a sensor's reading counts for this long, s (one measurement period and a half).
+    Attributes
+    ----------
+    mode
+        how it combines with the inertial detector.
+    rate_threshold
+        γ_ω on the angular-rate energy (σ_g = ``sigma_gyr_radps``); 25 admits |ω| up to 5 σ_g = 0.1 rad/s.
+    sigma_gyr_radps
+        σ_g, rad/s.
+    window_s
+        window of the angular-rate energy, s.
+    max_height_m
+        δ_h, largest height above rest still counted as down, m (three times the range noise of one reading).
+    hold_s
+        a sensor's reading counts for this long, s (one measurement period and a half).
     """
 
     mode: HeightMode = "inertial"

@@ -1,42 +1,32 @@
 """Floor levels from the stances alone: a gated height constraint for the inertial-only filter.
 
-A foot at rest stands on a floor, and floors are level: a stance on the floor of the last stance puts
-the IMU at the height it had there, within the stance-to-stance scatter of its rest height. The
-height constraint of Abdulrahim, Hide, Moore and Hill ("Using constraints for shoe mounted indoor
-pedestrian navigation", J. Navigation 65(1), 2012) applies this when the height changed less than a
-threshold since the last stance and not otherwise, so a stair (one or two risers per stride, 10-40
-cm) starts a new level and a level walk is held on its floor. footnav keeps every level stood on and
-returns to one within ``snap_m`` (the way back down a flight ends on the floor it started from).
+A foot at rest stands on a floor, and floors are level: a stance on the floor of the last stance puts the IMU at
+the height it had there, within the stance-to-stance scatter of its rest height. The height constraint of
+Abdulrahim, Hide, Moore and Hill ("Using constraints for shoe mounted indoor pedestrian navigation", J. Navigation
+65(1), 2012) applies this when the height changed less than a threshold since the last stance and not otherwise,
+so a stair (one or two risers per stride, 10-40 cm) starts a new level and a level walk is held on its floor.
+footnav keeps every level stood on and returns to one within ``snap_m`` (the way back down a flight ends on the
+floor it started from).
 
-The measurement, once per stance, ``update_after_s`` after it began (or at its end if it is
-shorter: :func:`stance_update_points`), when the loading response of the stance is over and the foot
-is flat (0-10 % of the gait cycle, about 0.1 s at a walk; Perry and Burnfield, "Gait Analysis:
-Normal and Pathological Function", 2nd ed., 2010, ch. 2; the zero-velocity updates hold the position
-from then to the stance's end):
+The measurement, once per stance, ``update_after_s`` after it began (or at its end if it is shorter:
+:func:`stance_update_points`), when the loading response is over and the foot is flat (0-10 % of the gait cycle,
+about 0.1 s at a walk; Perry and Burnfield, "Gait Analysis: Normal and Pathological Function", 2nd ed., 2010,
+ch. 2; the zero-velocity updates hold the position from then to the stance's end):
 
-    0 = p_z − z_level + w,   w ~ N(0, σ²),  σ = ``sigma_m``
+    0 = p_z − z_level + w,   w ~ N(0, σ²),  σ = ``sigma_m`` (the scatter of the IMU's rest height on one floor)
 
-The start floor is where the IMU rests at alignment (z = 0 for the single-IMU filter) and is not a
-state. Every other level is a state of the filter, a stochastic clone of δp_z when it is placed
-(Roumeliotis and Burdick, "Stochastic cloning", ICRA 2002; as the ToF floor levels of
-:mod:`footnav.pipeline.aiding.tof`), so what the filter learns later corrects the level too; the
-``level_states`` levels stood on most recently are states, an older one leaves the state
-(marginalised) and keeps its height. With ``level_states = 0`` every level is a constant (the
-smoother's forward pass and the dual-IMU navigator, whose filters have a fixed state).
+The start floor is where the IMU rests at alignment (z = 0 for the single-IMU filter) and is not a state. Every
+other level is a state of the filter, a stochastic clone of δp_z when it is placed (Roumeliotis and Burdick,
+"Stochastic cloning", ICRA 2002; as the ToF floor levels of :mod:`footnav.pipeline.aiding.tof`), so what the filter
+learns later corrects the level too; the ``level_states`` levels stood on most recently are states, an older one
+is marginalised and keeps its height. With ``level_states = 0`` every level is a constant (the smoother's forward
+pass and the dual-IMU navigator, whose filters have a fixed state).
 
-What it assumes, and what it costs: the floor under a stance is one of the levels already stood on
-when it is within ``same_level_m`` of the last one (or ``snap_m`` of another); a height change of less
-than that per stride (a thick mat, a 5 cm step) is taken for drift and removed. Larger changes are
-kept as the inertial solution measures them, so stairs stay stairs. A ramp is pulled towards the last
-level by each update as far as the filter's own height uncertainty lets it: with the 1-2 cm a swing
-adds on the real recordings, up to about 3 cm of rise per stride is removed almost whole and 4 cm in
-part (``tests/test_stance_levels.py``).
-``use = False`` turns it off (zero-velocity aiding alone).
-
-``sigma_m``: the rest height of the IMU scatters from stance to stance on one floor with the foot's
-posture. On the PyShoe VICON trials the motion-capture height of the foot at consecutive detected
-stances differs by a median of 0.2-0.7 cm (90th percentile 0.5-2.7 cm; the nine trials of
-``../shared/data``); 1 cm is used.
+A stance within ``same_level_m`` of the last level (or ``snap_m`` of another) is on it, so a height change of less
+than that per stride (a thick mat, a 5 cm step) is taken for drift and removed, and a ramp is pulled towards the
+last level as far as the filter's own height uncertainty lets it; larger changes are kept, so stairs stay stairs.
+``use = False`` turns it off (zero-velocity aiding alone). Units SI, heights in the navigation frame (z up). What
+it costs on ramps, and the measurement behind ``sigma_m``: the documentation's design page "Estimator".
 """
 
 from __future__ import annotations
@@ -79,15 +69,22 @@ def stance_update_points(still: NDArray[np.bool_], carried: int, after: int) -> 
     """Where a navigator applies the height update of each stance: after the stance's ``after``-th
     sample, or after its last one if it is shorter.
 
-    Args:
-        still: (n,) stance flags of the batch.
-        carried: samples of the stance in progress at the end of the previous batch (0: in swing).
-        after: samples of stance before the update (≥ 1).
+    Parameters
+    ----------
+    still
+        (n,) stance flags of the batch.
+    carried
+        samples of the stance in progress at the end of the previous batch (0: in swing).
+    after
+        samples of stance before the update (≥ 1).
 
-    Returns:
-        The indices b of the batch's samples before which an update is due (the update follows
-        sample b − 1, of the previous batch when b = 0), in order; and the samples of the stance in
-        progress at the end of this batch (0 when it ends in swing), to carry on.
+    Returns
+    -------
+    points : list[int]
+        The indices b of the batch's samples before which an update is due (the update follows sample b − 1, of the
+        previous batch when b = 0), in order.
+    carried : int
+        The samples of the stance in progress at the end of this batch (0 when it ends in swing), to carry on.
     """
     n = still.shape[0]
     if n == 0:
@@ -109,16 +106,24 @@ def stance_update_points(still: NDArray[np.bool_], carried: int, after: int) -> 
 class StanceLevelParams:
     """Settings of the stance height constraint (module docstring), SI units.
 
-    Attributes:
-        use: apply the constraint (False: the inertial-only filter without it).
-        sigma_m: 1σ of the IMU's rest height about its floor level, stance to stance.
-        same_level_m: a stance within this of the last stance's level is on that level.
-        snap_m: else, a stance within this of another known level is back on that level.
-        update_after_s: the update is made this long after the stance began (or at its end if it
-            is shorter): the foot is flat by then (module docstring).
-        new_level_sigma_m: 1σ added to a new level's clone of the height error.
-        level_states: how many levels are states of the filter (0: each level is a constant, its
-            height where it was first stood on; the smoother's forward pass, ``footnav.pipeline.smoothing.rts``).
+    Attributes
+    ----------
+    use
+        apply the constraint (False: the inertial-only filter without it).
+    sigma_m
+        1σ of the IMU's rest height about its floor level, stance to stance.
+    same_level_m
+        a stance within this of the last stance's level is on that level.
+    snap_m
+        else, a stance within this of another known level is back on that level.
+    update_after_s
+        the update is made this long after the stance began (or at its end if it is shorter): the foot is flat by then
+        (module docstring).
+    new_level_sigma_m
+        1σ added to a new level's clone of the height error.
+    level_states
+        how many levels are states of the filter (0: each level is a constant, its height where it was first stood on;
+        the smoother's forward pass, ``footnav.pipeline.smoothing.rts``).
     """
 
     use: bool = True

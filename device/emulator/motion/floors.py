@@ -43,8 +43,10 @@ class Floor:
 def floor_of(path: str) -> Floor:
     """The floor of a course of :data:`.paths.PATHS`.
 
-    Raises:
-        ValueError: an unknown course.
+    Raises
+    ------
+    ValueError
+        an unknown course.
     """
     if path not in paths.PATHS:
         raise ValueError(f"unknown path {path!r}; expected one of {sorted(paths.PATHS)}")

@@ -2,50 +2,31 @@
 
 The walk is built analytically, stride by stride, from the footholds of :mod:`.paths`:
 
-- **Still phases.** The walk starts with ``initial_still_s`` of standing (for initial alignment);
-  each stride ends with the foot flat and exactly still on its next foothold; after the last stride
-  the foot rests at least :data:`FINAL_REST_S` before the end of the record.
-- **Stride timing.** Stride period from the cadence model (:func:`.paths.stride_period_s`;
-  :data:`.paths.STAIR_STRIDE_PERIOD_S` on stairs), varying up to ±4 % from stride to stride as the
-  difference of two bounded draws, so that the mean cadence does not drift. The moving (swing)
-  phase takes :data:`SWING_FRACTION` (±1 %) of the stride, the still phase the rest.
-- **Swing**, with normalised time ``τ ∈ [0, 1]`` over a swing of duration ``T``:
+- **Still phases**: ``initial_still_s`` of standing first; each stride ends with the foot flat and
+  exactly still on its next foothold; after the last stride at least :data:`FINAL_REST_S` of rest.
+- **Stride timing**: the period of :func:`.paths.stride_period_s` (:data:`.paths.STAIR_STRIDE_PERIOD_S`
+  on stairs), varied by up to ±4 % as the difference of two bounded draws (no cadence drift); the
+  swing takes :data:`SWING_FRACTION` (±1 %) of the stride.
+- **Swing**, normalised time ``τ ∈ [0, 1]``: horizontal position ``A + (B − A) S(τ)`` with the septic
+  smoothstep ``S(τ) = 35τ⁴ − 84τ⁵ + 70τ⁶ − 20τ⁷`` (velocity, acceleration and jerk vanish at both
+  ends); height ``z_A + (z_B − z_A) S(u) + h · 256 τ⁴(1 − τ)⁴``, ``u = τ`` on level ground and
+  compressed into the first (up) or last (down) :data:`STAIR_RISE_FRACTION` on stairs, ``h`` the
+  clearance (:data:`CLEARANCE_PEAK_M`, :data:`STAIR_CLEARANCE_M`); Euler angles ZYX with
+  ``ψ = ψ_A + (ψ_B − ψ_A) S(τ)``, pitch ``θ = θ_down b₁(τ) − θ_up b₂(τ)`` (unit bumps
+  ``b₁ ∝ τ⁴(1 − τ)⁸``, toe down at τ = 1/3; ``b₂ ∝ τ⁸(1 − τ)⁴``, toe up at 2/3; positive θ turns the
+  toe down) and roll ``φ = φ₀ · 256 τ⁴(1 − τ)⁴``.
+- **Heel strike**: at the start of each still phase ``Δz(t) = −c · s⁵(1 − s)⁵``,
+  ``s = (t − t_hs)/W``, ``W`` = :data:`HEEL_STRIKE_DURATION_S`, ``c`` set by the peak acceleration
+  :data:`HEEL_STRIKE_PEAK_ACC_MPS2` (the sole sinks about 1 mm); its samples are not stance.
 
-  * horizontal position ``A + (B − A) S(τ)``, with ``S(τ) = 35τ⁴ − 84τ⁵ + 70τ⁶ − 20τ⁷`` the septic
-    smoothstep: velocity, acceleration *and jerk* vanish at both ends (one order smoother than the
-    minimum-jerk quintic, so a sampled strapdown integration sees no jerk steps);
-  * height ``z_A + (z_B − z_A) S(u) + h · 256 τ⁴(1 − τ)⁴``, where ``u = τ`` on level ground, ``u`` runs
-    over the first :data:`STAIR_RISE_FRACTION` of the swing going up (the foot rises early and
-    clears the step edges) and over the last part going down; ``h`` is the clearance bump
-    (:data:`CLEARANCE_PEAK_M` on level ground, :data:`STAIR_CLEARANCE_M` on stairs);
-  * Euler angles ZYX (yaw ψ about z, then pitch θ about the new y, then roll φ about x):
-    ``ψ = ψ_A + (ψ_B − ψ_A) S(τ)``; ``θ = θ_down b₁(τ) − θ_up b₂(τ)`` with unit-peak bumps
-    ``b₁ ∝ τ⁴(1 − τ)⁸`` (peak at τ = 1/3, heel-off, toe down) and ``b₂ ∝ τ⁸(1 − τ)⁴`` (peak at 2/3,
-    toe up before heel strike); a small roll bump ``φ = φ₀ · 256 τ⁴(1 − τ)⁴``.
-    With body y pointing left, a *positive* pitch turns the toe *down*: toe down 30° is θ = +30°.
+Everything is closed form: velocity and acceleration are the profiles' polynomial derivatives, the
+body rate is ``ω_b = [φ̇ − ψ̇ sin θ, θ̇ cos φ + ψ̇ sin φ cos θ, −θ̇ sin φ + ψ̇ cos φ cos θ]`` (Titterton
+& Weston 2004, ch. 3; Groves 2013, ch. 2) and the specific force ``f_b = C_bn (a_n − g_n)``,
+``g_n = [0, 0, −g]``: strapdown integration of the true signals reproduces the true motion up to the
+integrator's own error. Why these shapes: docs/design/emulator.md.
 
-- **Heel strike.** At the start of each still phase a short vertical transient
-  ``Δz(t) = −c · s⁵(1 − s)⁵``, ``s = (t − t_hs)/W``, ``W`` = :data:`HEEL_STRIKE_DURATION_S`, scaled so the
-  peak (upward) acceleration is :data:`HEEL_STRIKE_PEAK_ACC_MPS2`; the sole sinks about 1 mm. It
-  starts and ends with zero position, velocity, acceleration and jerk, so the foot is exactly still
-  afterwards. (This compact-support polynomial stands in for an exponential ``u² e⁻ᵘ`` impact, which
-  never ends exactly; it is smoother and longer than a real impact, so that a 1 kHz strapdown
-  integrates it to ~1e-5 m/s, where a 5 ms impact would leave ~5e-3 m/s per step.) Samples within
-  it are not marked as stance.
-
-Everything is closed form: velocity and acceleration come from the profiles' polynomial derivatives
-through the chain rule, and the body angular rate from the Euler angle rates,
-
-    ω_b = [φ̇ − ψ̇ sin θ,  θ̇ cos φ + ψ̇ sin φ cos θ,  −θ̇ sin φ + ψ̇ cos φ cos θ]
-
-(the Euler-angle kinematic equation inverted; Titterton & Weston 2004, ch. 3; Groves 2013, ch. 2,
-same ZYX sequence). The
-specific force is ``f_b = C_bn (a_n − g_n)`` with ``g_n = [0, 0, −g]``. Strapdown integration of the
-true (gyr_b_radps, acc_b_mps2) from the true initial state therefore reproduces the true motion up
-to the integrator's own error.
-
-Frames: navigation frame right-handed, z up, origin at the IMU's start position, start heading +x.
-Body frame: x forward (toe), y left, z up when the foot is flat. Quaternions scalar first.
+Frames: navigation right-handed, z up, origin at the IMU's start, start heading +x. Body: x toe,
+y left, z up when the foot is flat. Quaternions scalar first.
 
 References
 ----------
@@ -53,14 +34,13 @@ References
 - Groves, P. D. (2013). *Principles of GNSS, Inertial, and Multisensor Integrated Navigation
   Systems*, 2nd ed., Artech House.
 - Perry, J. and Burnfield, J. M. (2010). *Gait Analysis: Normal and Pathological Function*, 2nd ed.
-  Heel rise begins about 30 % into the gait cycle, so real foot-flat is shorter than the 40 % still
-  phase used here; the generous still phase is an assumption that suits zero-velocity detectors.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from footnav.device.emulator.motion import paths
@@ -153,20 +133,33 @@ _HEEL_DEPTH_M = HEEL_STRIKE_PEAK_ACC_MPS2 * HEEL_STRIKE_DURATION_S**2 / _HEEL_D2
 class GaitTruth:
     """True motion of the instrumented foot and the ideal IMU signals, at the sample times.
 
-    Attributes:
-        t_s: (n,) sample times from 0, s.
-        pos_n_m: (n, 3) IMU position, navigation frame, m; starts at exactly [0, 0, 0].
-        vel_n_mps: (n, 3) IMU velocity, m/s.
-        acc_n_mps2: (n, 3) IMU kinematic acceleration, m/s².
-        quat_nb_wxyz: (n, 4) attitude, body to navigation, scalar first; continuous in time (yaw is
-            not wrapped), so after a full turn it is the negative of the start quaternion.
-        gyr_b_radps: (n, 3) true angular rate of the body w.r.t. the navigation frame, body axes, rad/s.
-        acc_b_mps2: (n, 3) true specific force in body axes, ``C_bn (a_n − g_n)``, m/s².
-        stance: (n,) True where the foot is exactly still.
-        floor_z_m: (n,) height of the floor or tread under the IMU, m (clearance = z − floor_z).
-        distance_m: distance walked, the sum of 3D foothold-to-foothold distances, m.
-        rate_hz: sample rate, Hz.
-        n_strides: number of strides walked.
+    Attributes
+    ----------
+    t_s
+        (n,) sample times from 0, s.
+    pos_n_m
+        (n, 3) IMU position, navigation frame, m; starts at exactly [0, 0, 0].
+    vel_n_mps
+        (n, 3) IMU velocity, m/s.
+    acc_n_mps2
+        (n, 3) IMU kinematic acceleration, m/s².
+    quat_nb_wxyz
+        (n, 4) attitude, body to navigation, scalar first; continuous in time (yaw is not wrapped), so after a full turn
+        it is the negative of the start quaternion.
+    gyr_b_radps
+        (n, 3) true angular rate of the body w.r.t. the navigation frame, body axes, rad/s.
+    acc_b_mps2
+        (n, 3) true specific force in body axes, ``C_bn (a_n − g_n)``, m/s².
+    stance
+        (n,) True where the foot is exactly still.
+    floor_z_m
+        (n,) height of the floor or tread under the IMU, m (clearance = z − floor_z).
+    distance_m
+        distance walked, the sum of 3D foothold-to-foothold distances, m.
+    rate_hz
+        sample rate, Hz.
+    n_strides
+        number of strides walked.
     """
 
     t_s: F64
@@ -268,6 +261,139 @@ def euler_zyx_rates_to_gyr_b(
     )
 
 
+class _Strides(NamedTuple):
+    """The walk's stride schedule: ``m`` strides from foothold ``k`` to ``k + 1``."""
+
+    swing_start_s: F64
+    """(m,) start of each stride's swing, s."""
+    swing_end_s: F64
+    """(m,) end of each swing, s."""
+    swing_s: F64
+    """(m,) swing duration, s."""
+    foot_pos_n_m: F64
+    """(m + 1, 3) footholds relative to the start, m."""
+    foot_yaw_rad: F64
+    """(m + 1,) heading on each foothold, rad."""
+    stair_steps: NDArray[np.int64]
+    """(≥ m,) signed stair steps of each stride."""
+    riser_m: float
+    clearance_m: F64
+    """(≥ m,) clearance bump of each swing, m."""
+    toe_down_rad: F64
+    toe_up_rad: F64
+    roll_rad: F64
+    """(≥ m,) peak toe-down and toe-up pitch and roll of each swing, rad."""
+
+
+@dataclass(frozen=True, slots=True)
+class _Motion:
+    """The per-sample motion arrays that :func:`simulate_walk` fills piecewise (n samples)."""
+
+    pos_n_m: F64
+    vel_n_mps: F64
+    acc_n_mps2: F64
+    yaw_rad: F64
+    pitch_rad: F64
+    roll_rad: F64
+    yaw_rate_radps: F64
+    pitch_rate_radps: F64
+    roll_rate_radps: F64
+    floor_z_m: F64
+
+
+def _stride_schedule(
+    path: str,
+    duration_s: float,
+    speed_mps: float,
+    seed: int,
+    initial_still_s: float,
+    max_strides: int | None,
+    t_last_s: float,
+) -> _Strides:
+    """Enough candidate strides with their random variation, then those that end in time."""
+    level_period_s = paths.stride_period_s(speed_mps)
+    min_period_s = min(level_period_s, paths.STAIR_STRIDE_PERIOD_S) * (1.0 - 2.0 * _PERIOD_JITTER)
+    n_max = max(0, math.ceil((duration_s - initial_still_s) / min_period_s)) + 1
+    feet = paths.footholds(path, n_max, speed_mps * level_period_s)
+    rng = np.random.default_rng(seed)
+    stair_steps = feet.stair_steps
+    on_stairs = stair_steps != 0
+    period_s = np.where(on_stairs, paths.STAIR_STRIDE_PERIOD_S, level_period_s)
+    # Differenced jitter: each stride's period varies, but the cadence does not drift.
+    jitter = np.clip(rng.standard_normal(n_max + 1), -1.0, 1.0)
+    period_s = period_s * (1.0 + _PERIOD_JITTER * np.diff(jitter))
+    swing_s = period_s * (SWING_FRACTION + _SWING_FRACTION_JITTER * rng.uniform(-1.0, 1.0, n_max))
+    clearance_m = np.where(
+        on_stairs, STAIR_CLEARANCE_M, CLEARANCE_PEAK_M + _CLEARANCE_JITTER_M * rng.uniform(-1.0, 1.0, n_max)
+    )
+    toe_down_rad = TOE_DOWN_RAD + _PITCH_JITTER_RAD * rng.uniform(-1.0, 1.0, n_max)
+    toe_up_rad = TOE_UP_RAD + _PITCH_JITTER_RAD * rng.uniform(-1.0, 1.0, n_max)
+    roll_rad = ROLL_PEAK_RAD * rng.uniform(-1.0, 1.0, n_max)
+    swing_start_s = initial_still_s + np.concatenate([[0.0], np.cumsum(period_s[:-1])])
+    swing_end_s = swing_start_s + swing_s
+    fits = swing_end_s + HEEL_STRIKE_DURATION_S + FINAL_REST_S <= t_last_s
+    m = int(np.count_nonzero(np.cumprod(fits)))
+    if max_strides is not None:
+        m = min(m, max(0, max_strides))
+    return _Strides(
+        swing_start_s=swing_start_s[:m],
+        swing_end_s=swing_end_s[:m],
+        swing_s=swing_s[:m],
+        foot_pos_n_m=feet.pos_n_m[: m + 1] - feet.pos_n_m[0],
+        foot_yaw_rad=feet.yaw_rad[: m + 1],
+        stair_steps=stair_steps,
+        riser_m=feet.riser_m,
+        clearance_m=clearance_m,
+        toe_down_rad=toe_down_rad,
+        toe_up_rad=toe_up_rad,
+        roll_rad=roll_rad,
+    )
+
+
+def _fill_swing(
+    strides: _Strides, swing_samples: NDArray[np.intp], stride: NDArray[np.intp], since_start_s: F64, motion: _Motion
+) -> None:
+    """The swing samples of ``motion``: normalised time tau over stride i, from foothold i to i + 1."""
+    sw, i = swing_samples, stride
+    dur_s = strides.swing_s[i]
+    tau = since_start_s / dur_s
+    start_m = strides.foot_pos_n_m[i]
+    delta_m = strides.foot_pos_n_m[i + 1] - start_m
+    s0 = _poly(_SMOOTHSTEP, tau)
+    s1 = _poly(_SMOOTHSTEP_D1, tau) / dur_s
+    s2 = _poly(_SMOOTHSTEP_D2, tau) / dur_s**2
+    for axis in (0, 1):
+        motion.pos_n_m[sw, axis] = start_m[:, axis] + delta_m[:, axis] * s0
+        motion.vel_n_mps[sw, axis] = delta_m[:, axis] * s1
+        motion.acc_n_mps2[sw, axis] = delta_m[:, axis] * s2
+
+    steps = strides.stair_steps[i]
+    ramp_start = np.where(steps < 0, 1.0 - STAIR_RISE_FRACTION, 0.0)
+    ramp_width = np.where(steps != 0, STAIR_RISE_FRACTION, 1.0)
+    u = np.clip((tau - ramp_start) / ramp_width, 0.0, 1.0)
+    dur_u_s = dur_s * ramp_width
+    rise_m = delta_m[:, 2]
+    height_m = strides.clearance_m[i]
+    c0 = _poly(_CLEAR, tau)
+    c1 = _poly(_CLEAR_D1, tau) / dur_s
+    motion.pos_n_m[sw, 2] = start_m[:, 2] + rise_m * _poly(_SMOOTHSTEP, u) + height_m * c0
+    motion.vel_n_mps[sw, 2] = rise_m * _poly(_SMOOTHSTEP_D1, u) / dur_u_s + height_m * c1
+    motion.acc_n_mps2[sw, 2] = (
+        rise_m * _poly(_SMOOTHSTEP_D2, u) / dur_u_s**2 + height_m * _poly(_CLEAR_D2, tau) / dur_s**2
+    )
+    edges_crossed = np.floor(s0 * np.abs(steps) + 0.5)
+    motion.floor_z_m[sw] = start_m[:, 2] + np.sign(steps) * strides.riser_m * edges_crossed
+
+    turn_rad = strides.foot_yaw_rad[i + 1] - strides.foot_yaw_rad[i]
+    motion.yaw_rad[sw] = strides.foot_yaw_rad[i] + turn_rad * s0
+    motion.yaw_rate_radps[sw] = turn_rad * s1
+    down_rad, up_rad = strides.toe_down_rad[i], strides.toe_up_rad[i]
+    motion.pitch_rad[sw] = down_rad * _poly(_TOE_DOWN, tau) - up_rad * _poly(_TOE_UP, tau)
+    motion.pitch_rate_radps[sw] = (down_rad * _poly(_TOE_DOWN_D1, tau) - up_rad * _poly(_TOE_UP_D1, tau)) / dur_s
+    motion.roll_rad[sw] = strides.roll_rad[i] * c0
+    motion.roll_rate_radps[sw] = strides.roll_rad[i] * c1
+
+
 def simulate_walk(
     path: str,
     duration_s: float,
@@ -324,35 +450,10 @@ def simulate_walk(
     t_s = np.arange(n) / rate_hz
     t_last_s = (n - 1) / rate_hz if n else 0.0
 
-    # Stride schedule: enough candidate strides, then keep those that end in time.
-    level_period_s = paths.stride_period_s(speed_mps)
-    min_period_s = min(level_period_s, paths.STAIR_STRIDE_PERIOD_S) * (1.0 - 2.0 * _PERIOD_JITTER)
-    n_max = max(0, math.ceil((duration_s - initial_still_s) / min_period_s)) + 1
-    feet = paths.footholds(path, n_max, speed_mps * level_period_s)
-    rng = np.random.default_rng(seed)
-    stair_steps = feet.stair_steps
-    on_stairs = stair_steps != 0
-    period_s = np.where(on_stairs, paths.STAIR_STRIDE_PERIOD_S, level_period_s)
-    # Differenced jitter: each stride's period varies, but the cadence does not drift.
-    jitter = np.clip(rng.standard_normal(n_max + 1), -1.0, 1.0)
-    period_s = period_s * (1.0 + _PERIOD_JITTER * np.diff(jitter))
-    swing_s = period_s * (SWING_FRACTION + _SWING_FRACTION_JITTER * rng.uniform(-1.0, 1.0, n_max))
-    clearance_m = np.where(
-        on_stairs, STAIR_CLEARANCE_M, CLEARANCE_PEAK_M + _CLEARANCE_JITTER_M * rng.uniform(-1.0, 1.0, n_max)
-    )
-    toe_down_rad = TOE_DOWN_RAD + _PITCH_JITTER_RAD * rng.uniform(-1.0, 1.0, n_max)
-    toe_up_rad = TOE_UP_RAD + _PITCH_JITTER_RAD * rng.uniform(-1.0, 1.0, n_max)
-    roll_rad = ROLL_PEAK_RAD * rng.uniform(-1.0, 1.0, n_max)
-    swing_start_s = initial_still_s + np.concatenate([[0.0], np.cumsum(period_s[:-1])])
-    swing_end_s = swing_start_s + swing_s
-    fits = swing_end_s + HEEL_STRIKE_DURATION_S + FINAL_REST_S <= t_last_s
-    m = int(np.count_nonzero(np.cumprod(fits)))
-    if max_strides is not None:
-        m = min(m, max(0, max_strides))
-    swing_start_s, swing_end_s, swing_s = swing_start_s[:m], swing_end_s[:m], swing_s[:m]
-
-    foot_pos_n_m = feet.pos_n_m[: m + 1] - feet.pos_n_m[0]
-    foot_yaw_rad = feet.yaw_rad[: m + 1]
+    strides = _stride_schedule(path, duration_s, speed_mps, seed, initial_still_s, max_strides, t_last_s)
+    m = strides.swing_start_s.size
+    swing_start_s, swing_end_s, swing_s = strides.swing_start_s, strides.swing_end_s, strides.swing_s
+    foot_pos_n_m, foot_yaw_rad = strides.foot_pos_n_m, strides.foot_yaw_rad
 
     # Which stride each sample belongs to (-1 before the first); moving (swing) or resting.
     if m:
@@ -397,43 +498,19 @@ def simulate_walk(
     stance = ~swing_mask
     stance[hs] = False
 
-    # Swing: normalised time tau over stride i, from foothold i to i + 1.
-    i = stride[sw]
-    dur_s = swing_s[i]
-    tau = since_start_s[sw] / dur_s
-    start_m = foot_pos_n_m[i]
-    delta_m = foot_pos_n_m[i + 1] - start_m
-    s0 = _poly(_SMOOTHSTEP, tau)
-    s1 = _poly(_SMOOTHSTEP_D1, tau) / dur_s
-    s2 = _poly(_SMOOTHSTEP_D2, tau) / dur_s**2
-    for axis in (0, 1):
-        pos_n_m[sw, axis] = start_m[:, axis] + delta_m[:, axis] * s0
-        vel_n_mps[sw, axis] = delta_m[:, axis] * s1
-        acc_n_mps2[sw, axis] = delta_m[:, axis] * s2
-
-    steps = stair_steps[i]
-    ramp_start = np.where(steps < 0, 1.0 - STAIR_RISE_FRACTION, 0.0)
-    ramp_width = np.where(steps != 0, STAIR_RISE_FRACTION, 1.0)
-    u = np.clip((tau - ramp_start) / ramp_width, 0.0, 1.0)
-    dur_u_s = dur_s * ramp_width
-    rise_m = delta_m[:, 2]
-    height_m = clearance_m[i]
-    c0 = _poly(_CLEAR, tau)
-    c1 = _poly(_CLEAR_D1, tau) / dur_s
-    pos_n_m[sw, 2] = start_m[:, 2] + rise_m * _poly(_SMOOTHSTEP, u) + height_m * c0
-    vel_n_mps[sw, 2] = rise_m * _poly(_SMOOTHSTEP_D1, u) / dur_u_s + height_m * c1
-    acc_n_mps2[sw, 2] = rise_m * _poly(_SMOOTHSTEP_D2, u) / dur_u_s**2 + height_m * _poly(_CLEAR_D2, tau) / dur_s**2
-    edges_crossed = np.floor(s0 * np.abs(steps) + 0.5)
-    floor_z_m[sw] = start_m[:, 2] + np.sign(steps) * feet.riser_m * edges_crossed
-
-    turn_rad = foot_yaw_rad[i + 1] - foot_yaw_rad[i]
-    yaw_rad[sw] = foot_yaw_rad[i] + turn_rad * s0
-    yaw_rate_radps[sw] = turn_rad * s1
-    down_rad, up_rad = toe_down_rad[i], toe_up_rad[i]
-    pitch_rad[sw] = down_rad * _poly(_TOE_DOWN, tau) - up_rad * _poly(_TOE_UP, tau)
-    pitch_rate_radps[sw] = (down_rad * _poly(_TOE_DOWN_D1, tau) - up_rad * _poly(_TOE_UP_D1, tau)) / dur_s
-    roll_rad_all[sw] = roll_rad[i] * c0
-    roll_rate_radps[sw] = roll_rad[i] * c1
+    motion = _Motion(
+        pos_n_m,
+        vel_n_mps,
+        acc_n_mps2,
+        yaw_rad,
+        pitch_rad,
+        roll_rad_all,
+        yaw_rate_radps,
+        pitch_rate_radps,
+        roll_rate_radps,
+        floor_z_m,
+    )
+    _fill_swing(strides, sw, stride[sw], since_start_s[sw], motion)
 
     quat_nb_wxyz = euler_zyx_to_quat_wxyz(yaw_rad, pitch_rad, roll_rad_all)
     gyr_b_radps = euler_zyx_rates_to_gyr_b(pitch_rad, roll_rad_all, yaw_rate_radps, pitch_rate_radps, roll_rate_radps)

@@ -98,13 +98,18 @@ _GROUND_WALK_M = 2.0
 class Footholds:
     """Footholds of the instrumented foot, in walking order.
 
-    Attributes:
-        pos_n_m: (m + 1, 3) foothold positions (IMU at rest), m; row 0 is the start.
-        yaw_rad: (m + 1,) foot heading at each foothold, rad, continuous (not wrapped).
-        stair_steps: (m,) signed number of stair steps climbed in each stride (0 on level ground,
-            +2 up, -2 down).
-        riser_m: stair riser height, m (the floor under a stair stride changes by this per step).
-        lap_strides: strides in one lap of a closed course (0 for an open course).
+    Attributes
+    ----------
+    pos_n_m
+        (m + 1, 3) foothold positions (IMU at rest), m; row 0 is the start.
+    yaw_rad
+        (m + 1,) foot heading at each foothold, rad, continuous (not wrapped).
+    stair_steps
+        (m,) signed number of stair steps climbed in each stride (0 on level ground, +2 up, -2 down).
+    riser_m
+        stair riser height, m (the floor under a stair stride changes by this per step).
+    lap_strides
+        strides in one lap of a closed course (0 for an open course).
     """
 
     pos_n_m: F64

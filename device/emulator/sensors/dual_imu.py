@@ -66,14 +66,22 @@ def angular_acceleration(gyr_b_radps: F64, rate_hz: float) -> F64:
 class DualImuTruth:
     """True motion of both IMUs of a rigid board.
 
-    Attributes:
-        imu1: the gait truth of IMU 1 (the reference point).
-        lever_b_m: (3,) IMU 2's position in IMU 1's body axes, m.
-        pos2_n_m: (n, 3) IMU 2's position, navigation frame, m.
-        vel2_n_mps: (n, 3) IMU 2's velocity, m/s.
-        acc_b_mps2: (n, 2, 3) true specific force of IMU 1 and IMU 2, body axes, m/s².
-        gyr_b_radps: (n, 2, 3) true angular rate of IMU 1 and IMU 2 (equal), rad/s.
-        angacc_b_radps2: (n, 3) body angular acceleration, rad/s².
+    Attributes
+    ----------
+    imu1
+        the gait truth of IMU 1 (the reference point).
+    lever_b_m
+        (3,) IMU 2's position in IMU 1's body axes, m.
+    pos2_n_m
+        (n, 3) IMU 2's position, navigation frame, m.
+    vel2_n_mps
+        (n, 3) IMU 2's velocity, m/s.
+    acc_b_mps2
+        (n, 2, 3) true specific force of IMU 1 and IMU 2, body axes, m/s².
+    gyr_b_radps
+        (n, 2, 3) true angular rate of IMU 1 and IMU 2 (equal), rad/s.
+    angacc_b_radps2
+        (n, 3) body angular acceleration, rad/s².
     """
 
     imu1: GaitTruth
@@ -110,13 +118,20 @@ def rigid_board(truth: GaitTruth, lever_b_m: F64 | tuple[float, float, float] = 
 class DualImuRecording:
     """A simulated dual-IMU walk: truth and what the two IMUs measure.
 
-    Attributes:
-        truth: the rigid-board truth.
-        acc_b_mps2: (n, 2, 3) measured specific force, IMU 1 then IMU 2, m/s².
-        gyr_b_radps: (n, 2, 3) measured angular rate, rad/s.
-        errors: the errors added to IMU 1 and IMU 2.
-        path: course name.
-        seed: the seed everything was drawn from.
+    Attributes
+    ----------
+    truth
+        the rigid-board truth.
+    acc_b_mps2
+        (n, 2, 3) measured specific force, IMU 1 then IMU 2, m/s².
+    gyr_b_radps
+        (n, 2, 3) measured angular rate, rad/s.
+    errors
+        the errors added to IMU 1 and IMU 2.
+    path
+        course name.
+    seed
+        the seed everything was drawn from.
     """
 
     truth: DualImuTruth

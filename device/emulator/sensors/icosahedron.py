@@ -94,13 +94,20 @@ def quat_nb_resting_on(up_b: F64) -> F64:
 class IcosahedronTruth:
     """True motion of the procedure at ``rate_hz``.
 
-    Attributes:
-        t_s: (n,) sample times from 0, s.
-        quat_nb_wxyz: (n, 4) attitude, body to navigation.
-        acc_b_mps2: (n, 3) true specific force, body frame, m/s².
-        gyr_b_radps: (n, 3) true angular rate, body frame, rad/s.
-        face: (n,) index into :func:`icosahedron_face_normals` while still on a face, −1 while turning.
-        order: (20,) faces in the order visited.
+    Attributes
+    ----------
+    t_s
+        (n,) sample times from 0, s.
+    quat_nb_wxyz
+        (n, 4) attitude, body to navigation.
+    acc_b_mps2
+        (n, 3) true specific force, body frame, m/s².
+    gyr_b_radps
+        (n, 3) true angular rate, body frame, rad/s.
+    face
+        (n,) index into :func:`icosahedron_face_normals` while still on a face, −1 while turning.
+    order
+        (20,) faces in the order visited.
     """
 
     t_s: F64
@@ -200,11 +207,16 @@ class Miscalibration:
     Accelerometer: ``y = K L u + (K_T u + b_T)(T − t_ref_c) + b`` (:mod:`footnav.pipeline.calibration.model`, θ order
     ``k(3), l_yx l_zx l_zy, b(3), k_T(3), b_T(3)``). Gyroscope: ``y = ω + b_g + b_gT (T − t_ref_c)``.
 
-    Attributes:
-        theta: (15,) accelerometer parameters.
-        gyr_bias_radps: (3,) gyroscope bias at ``t_ref_c``, rad/s.
-        gyr_bias_slope_radps_per_c: (3,) its temperature slope.
-        t_ref_c: temperature at which the biases are given, °C.
+    Attributes
+    ----------
+    theta
+        (15,) accelerometer parameters.
+    gyr_bias_radps
+        (3,) gyroscope bias at ``t_ref_c``, rad/s.
+    gyr_bias_slope_radps_per_c
+        (3,) its temperature slope.
+    t_ref_c
+        temperature at which the biases are given, °C.
     """
 
     theta: F64 = field(

@@ -2,51 +2,32 @@
 
 Measured signal, per sensor (accelerometer or gyroscope) and axis, at sample ``k``::
 
-    y_k = x_k + b_0 + d_k + w_k
+    y_k = M x_k + b_0 + d_k + w_k
 
 - ``x_k``: the true signal (specific force, m/s², or angular rate, rad/s, in body axes);
+- ``M = (I + diag(s)) + N``: optional axis errors (:class:`AxisErrors`), drawn once per run: scale-factor errors
+  ``s`` and cross-axis sensitivities ``N`` (zero diagonal; ``N_ij`` the fraction of axis j's input read by axis i,
+  as datasheets define it); identity by default;
 - ``b_0``: the turn-on (residual) bias, constant over a run, drawn from N(0, σ_b0²);
-- ``d_k``: the in-run bias drift, a first-order Gauss-Markov process with stationary standard
-  deviation equal to the datasheet bias instability σ_bi and correlation time τ_c
-  (:data:`BIAS_CORRELATION_TIME_S`): ``d_{k+1} = φ d_k + √(1 − φ²) σ_bi ε_k``, ``φ = exp(−Δt/τ_c)``,
-  started from its stationary distribution. Its driving density is ``σ_bi √(2/τ_c)`` per √s;
+- ``d_k``: the in-run bias drift, a first-order Gauss-Markov process with stationary standard deviation the
+  datasheet bias instability σ_bi and correlation time τ_c (:data:`BIAS_CORRELATION_TIME_S`):
+  ``d_{k+1} = φ d_k + √(1 − φ²) σ_bi ε_k``, ``φ = exp(−Δt/τ_c)``, started from its stationary distribution (driving
+  density ``σ_bi √(2/τ_c)`` per √s);
 - ``w_k``: white noise, independent between samples.
 
-Optionally the gyroscope lags the accelerometer by a constant ``gyr_delay_s`` = τ (:func:`corrupt`):
-its true signal is read at ``t_k − τ`` instead of ``t_k`` (linear interpolation between the true
-samples, held at the first and last sample beyond the ends). Accelerometer and gyroscope paths of
-one MEMS part have their own digital low-pass filters and delays (the MPU-6000/6050 register map,
-RM-MPU-6000A, lists per DLPF setting e.g. 0 ms for the accelerometer and 0.98 ms for the gyroscope
-at the widest one; the MPU-6500 has separately configured accelerometer and gyroscope filters), and
-a relative delay is what an accelerometer-gyroscope time-offset calibration estimates (Li and
-Mourikis, "Online temporal calibration for camera-IMU systems", IJRR 2014; Rehder et al.,
-"Extending kalibr: calibrating the extrinsics of multiple IMUs and of individual axes", ICRA 2016).
+Optionally the gyroscope lags the accelerometer by a constant ``gyr_delay_s`` = τ (:func:`corrupt`): its true
+signal is read at ``t_k − τ`` (linear interpolation, held at the first and last sample beyond the ends).
 
-Noise-density convention. Densities here are *one-sided* spectral densities as datasheets give
-them (RMS noise = density × √bandwidth). Samples are taken without an anti-alias filter, so the noise
-bandwidth is the Nyquist frequency and the per-sample standard deviation is::
+Noise densities are *one-sided* spectral densities as datasheets give them (RMS noise = density × √bandwidth).
+Samples are taken without an anti-alias filter, so the noise bandwidth is the Nyquist frequency and the per-sample
+standard deviation is ``σ_w = density × √(rate / 2)``. A random-walk coefficient N (ARW in °/√h, VRW in m/s/√h,
+the Allan deviation at 1 s) is ``density = √2 × N``; integrating the simulated noise then gives a random walk of
+exactly ``N √t``. Not modelled: g-sensitivity, nonlinearity, quantisation, temperature (the accelerometer's
+temperature model is :class:`footnav.device.emulator.sensors.icosahedron.Miscalibration`). Why these terms and
+values: the documentation's design page "Emulator".
 
-    σ_w = density × √(rate / 2)
-
-Random-walk coefficients (ARW in °/√h, VRW in m/s/√h, i.e. the Allan deviation at 1 s) relate to
-the one-sided density by ``density = √2 × N``; with that, integrating the simulated noise gives an
-angle (velocity) random walk of exactly ``N √t``.
-
-Optionally (:class:`AxisErrors`, ``corrupt(..., axes=...)``) each sensor's true signal first goes
-through a fixed axis-error matrix ``M = (I + diag(s)) + N``: per-axis scale-factor errors ``s`` and
-cross-axis sensitivities ``N`` (zero diagonal; ``N_ij`` is the fraction of axis j's input read by
-axis i, as datasheets define cross-axis sensitivity), drawn once per run. The measured signal is
-then ``y_k = M x_k + b_0 + d_k + w_k``. These are the errors a calibration removes; what is left of
-them after the calibration a unit had is what :data:`AXIS_ERRORS` holds. No g-sensitivity,
-nonlinearity, quantisation or temperature effects are modelled here (the temperature model of the
-accelerometer is :class:`footnav.device.emulator.sensors.icosahedron.Miscalibration`).
-
-References
-----------
-- IEEE Std 952-1997, *IEEE Standard Specification Format Guide and Test Procedure for Single-Axis
-  Interferometric Fiber Optic Gyros* (Allan variance, random walk and bias instability terms).
-- Groves, P. D. (2013). *Principles of GNSS, Inertial, and Multisensor Integrated Navigation
-  Systems*, 2nd ed., Artech House, §4.4 (inertial sensor error models) and §14.2.
+References: IEEE Std 952-1997 (Allan variance, random walk and bias instability terms); Groves, P. D. (2013),
+*Principles of GNSS, Inertial, and Multisensor Integrated Navigation Systems*, 2nd ed., §4.4 and §14.2.
 """
 
 from __future__ import annotations
@@ -75,15 +56,24 @@ _SQRT_H = 60.0  # √(3600 s): divides a per-√h figure into a per-√s one
 class ImuGrade:
     """Error magnitudes of one IMU, the same for all three axes of each sensor.
 
-    Attributes:
-        name: short identifier (the key in :data:`IMU_GRADES`).
-        acc_noise_density_mps2_rthz: accelerometer white noise, one-sided density, m/s²/√Hz.
-        gyr_noise_density_radps_rthz: gyroscope white noise, one-sided density, rad/s/√Hz.
-        acc_bias_sigma_mps2: accelerometer turn-on (residual) bias, 1σ per axis, m/s².
-        gyr_bias_sigma_radps: gyroscope turn-on (residual) bias, 1σ per axis, rad/s.
-        acc_bias_instability_mps2: accelerometer in-run bias drift, stationary 1σ, m/s².
-        gyr_bias_instability_radps: gyroscope in-run bias drift, stationary 1σ, rad/s.
-        bias_correlation_time_s: correlation time of the in-run drift, s.
+    Attributes
+    ----------
+    name
+        Short identifier (the key in :data:`IMU_GRADES`).
+    acc_noise_density_mps2_rthz
+        Accelerometer white noise, one-sided density, m/s²/√Hz.
+    gyr_noise_density_radps_rthz
+        Gyroscope white noise, one-sided density, rad/s/√Hz.
+    acc_bias_sigma_mps2
+        Accelerometer turn-on (residual) bias, 1σ per axis, m/s².
+    gyr_bias_sigma_radps
+        Gyroscope turn-on (residual) bias, 1σ per axis, rad/s.
+    acc_bias_instability_mps2
+        Accelerometer in-run bias drift, stationary 1σ, m/s².
+    gyr_bias_instability_radps
+        Gyroscope in-run bias drift, stationary 1σ, rad/s.
+    bias_correlation_time_s
+        Correlation time of the in-run drift, s.
     """
 
     name: str
@@ -173,12 +163,18 @@ IMU_GRADES: dict[str, ImuGrade] = {
 class AxisErrors:
     """Scale-factor and cross-axis errors of one unit's sensors, 1σ per element (dimensionless).
 
-    Attributes:
-        name: short identifier (the key in :data:`AXIS_ERRORS`).
-        acc_scale_sigma: accelerometer scale-factor error per axis (0.01 = 1 %).
-        acc_cross_axis_sigma: accelerometer cross-axis sensitivity per off-diagonal element.
-        gyr_scale_sigma: gyroscope scale-factor error per axis.
-        gyr_cross_axis_sigma: gyroscope cross-axis sensitivity per off-diagonal element.
+    Attributes
+    ----------
+    name
+        Short identifier (the key in :data:`AXIS_ERRORS`).
+    acc_scale_sigma
+        Accelerometer scale-factor error per axis (0.01 = 1 %).
+    acc_cross_axis_sigma
+        Accelerometer cross-axis sensitivity per off-diagonal element.
+    gyr_scale_sigma
+        Gyroscope scale-factor error per axis.
+    gyr_cross_axis_sigma
+        Gyroscope cross-axis sensitivity per off-diagonal element.
     """
 
     name: str
@@ -205,14 +201,11 @@ class AxisErrors:
 
 AXIS_ERRORS: dict[str, AxisErrors] = {
     "none": AxisErrors("none", 0.0, 0.0, 0.0, 0.0),
-    # A consumer MEMS unit whose accelerometer was calibrated on the icosahedron jig (15 parameters,
-    # as the multi-sensor shoe platform does; footnav's procedure leaves at most 0.011 % scale and
-    # 0.0074° misalignment on the emulated unit, README "Calibration") and whose gyroscope had only
-    # its bias calibrated (the platform calibrates gyroscope bias alone). The gyroscope keeps its
-    # datasheet tolerances: MPU-6500 (PS-MPU-6500A-01 rev 1.1) sensitivity scale factor tolerance
-    # ±3 % and cross-axis sensitivity ±2 %, taken here as 3σ (an assumption: the datasheet gives
-    # them as typical limits without a distribution). The accelerometer residual is taken as 0.01 %
-    # scale and 0.02 % (0.011°) cross-axis, 1σ.
+    # A consumer MEMS unit whose accelerometer was calibrated on the icosahedron jig (15 parameters)
+    # and whose gyroscope had only its bias calibrated. Accelerometer residual: 0.01 % scale and
+    # 0.02 % (0.011°) cross-axis, 1σ (an assumption, design page "Emulator"). Gyroscope: the
+    # MPU-6500 datasheet (PS-MPU-6500A-01 rev 1.1) sensitivity scale factor tolerance ±3 % and
+    # cross-axis sensitivity ±2 %, taken as 3σ (an assumption: the datasheet gives typical limits).
     "gyro-bias-calibrated": AxisErrors(
         "gyro-bias-calibrated",
         acc_scale_sigma=1e-4,
@@ -228,17 +221,28 @@ AXIS_ERRORS: dict[str, AxisErrors] = {
 class ImuErrorsApplied:
     """The errors :func:`corrupt` added, so that tests and evaluations can subtract or check them.
 
-    Attributes:
-        grade: the grade the errors were drawn from.
-        rate_hz: sample rate, Hz.
-        acc_bias_b_mps2: (n, 3) total accelerometer bias (turn-on + drift) at each sample, m/s².
-        gyr_bias_b_radps: (n, 3) total gyroscope bias at each sample, rad/s.
-        acc_turn_on_bias_b_mps2: (3,) accelerometer turn-on bias, m/s².
-        gyr_turn_on_bias_b_radps: (3,) gyroscope turn-on bias, rad/s.
-        acc_noise_b_mps2: (n, 3) accelerometer white noise added, m/s².
-        gyr_noise_b_radps: (n, 3) gyroscope white noise added, rad/s.
-        acc_axes: (3, 3) accelerometer axis-error matrix applied (identity: none).
-        gyr_axes: (3, 3) gyroscope axis-error matrix applied.
+    Attributes
+    ----------
+    grade
+        The grade the errors were drawn from.
+    rate_hz
+        Sample rate, Hz.
+    acc_bias_b_mps2
+        (n, 3) total accelerometer bias (turn-on + drift) at each sample, m/s².
+    gyr_bias_b_radps
+        (n, 3) total gyroscope bias at each sample, rad/s.
+    acc_turn_on_bias_b_mps2
+        (3,) accelerometer turn-on bias, m/s².
+    gyr_turn_on_bias_b_radps
+        (3,) gyroscope turn-on bias, rad/s.
+    acc_noise_b_mps2
+        (n, 3) accelerometer white noise added, m/s².
+    gyr_noise_b_radps
+        (n, 3) gyroscope white noise added, rad/s.
+    acc_axes
+        (3, 3) accelerometer axis-error matrix applied (identity: none).
+    gyr_axes
+        (3, 3) gyroscope axis-error matrix applied.
     """
 
     grade: ImuGrade

@@ -35,7 +35,7 @@ import numpy as np
 from footnav.device.emulator.motion.floors import Floor
 from footnav.device.emulator.scripts import TofScript
 from footnav.device.protocol import extensions
-from footnav.pipeline.aiding.tof import DEFAULT_DIR_B, DEFAULT_LEVER_B_M
+from footnav.pipeline.aiding.tof_types import DEFAULT_DIR_B, DEFAULT_LEVER_B_M
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]
@@ -54,7 +54,7 @@ DEFAULT_MOUNTS: tuple[TofMount, ...] = tuple(
 )
 """Toe, mid-foot and heel sensors, 3-4 cm above the IMU's reference point (which rests on the floor
 in the gait model), looking roughly down: the mounting the navigator assumes by default
-(``footnav.pipeline.aiding.tof.DEFAULT_LEVER_B_M``, ``DEFAULT_DIR_B``)."""
+(``footnav.pipeline.aiding.tof_types.DEFAULT_LEVER_B_M``, ``DEFAULT_DIR_B``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,14 +74,22 @@ class TofSensorModel:
 def ray_cast(origin_n_m: F64, dir_n: F64, floor: Floor, max_range_m: float) -> tuple[F64, F64]:
     """First hit of rays with a floor of level treads and vertical risers.
 
-    Args:
-        origin_n_m: (m, 3) ray origins.
-        dir_n: (m, 3) unit directions.
-        floor: the floor.
-        max_range_m: rays are followed this far.
+    Parameters
+    ----------
+    origin_n_m
+        (m, 3) ray origins.
+    dir_n
+        (m, 3) unit directions.
+    floor
+        the floor.
+    max_range_m
+        rays are followed this far.
 
-    Returns:
-        range_m (m,) (NaN: no hit within range, or the origin is under the floor) and cos_incidence
+    Returns
+    -------
+    range_m : F64
+        (m,) (NaN: no hit within range, or the origin is under the floor).
+    cos_incidence : F64
         (m,), the cosine between the reversed ray and the normal of the surface hit.
     """
     m = origin_n_m.shape[0]
@@ -143,16 +151,24 @@ def tof_readings(
 ) -> TofScript:
     """The readings of the shoe's ToF sensors along a true trajectory.
 
-    Args:
-        truth_t_s: (n,) truth sample times, s.
-        pos_n_m: (n, 3) true IMU position.
-        quat_nb_wxyz: (n, 4) true attitude, body to navigation.
-        floor: the floor walked on (:func:`.floors.floor_of`).
-        model: sensor settings (default :class:`TofSensorModel`).
+    Parameters
+    ----------
+    truth_t_s
+        (n,) truth sample times, s.
+    pos_n_m
+        (n, 3) true IMU position.
+    quat_nb_wxyz
+        (n, 4) true attitude, body to navigation.
+    floor
+        the floor walked on (:func:`.floors.floor_of`).
+    model
+        sensor settings (default :class:`TofSensorModel`).
 
-    Returns:
-        A :class:`~.scripts.TofScript` in time order: t_s (m,), sensor (m,), range_m (m,) (NaN where
-        the status is not valid), status (m,).
+    Returns
+    -------
+    TofScript
+        A :class:`~.scripts.TofScript` in time order: t_s (m,), sensor (m,), range_m (m,) (NaN where the status is not
+        valid), status (m,).
     """
     model = model or TofSensorModel()
     truth_t_s = np.asarray(truth_t_s, dtype=np.float64)

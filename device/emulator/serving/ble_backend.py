@@ -85,9 +85,12 @@ def bleak_uuid(u: bumble_core.UUID) -> str:
 class BumbleAdapter:
     """The host side of the virtual radio: one bumble device shared by scanners and clients.
 
-    Args:
-        link: the virtual radio the emulated peripherals are on.
-        address: this host's (static random) address.
+    Parameters
+    ----------
+    link
+        the virtual radio the emulated peripherals are on.
+    address
+        this host's (static random) address.
     """
 
     def __init__(self, link: LocalLink, address: str = DEFAULT_HOST_ADDRESS) -> None:

@@ -108,25 +108,37 @@ class Stats:
 class BleShoePeripheral:
     """Stream IMU sample arrays as a shoe unit's BLE UART.
 
-    Args:
-        link: the virtual radio (the host's :class:`footnav.device.emulator.serving.ble_backend.BumbleAdapter` is
-        on it too).
-        t_s: (n,) sample times at the unit's 1 kHz base rate, s, increasing.
-        acc_b_mps2: (n, 3) specific force, body frame, m/s².
-        gyr_b_radps: (n, 3) angular rate, body frame, rad/s.
-        name: advertised local name.
-        address: the peripheral's static random address.
-        profile: which UART service to serve and advertise.
-        speed: emulated seconds per wall second (``math.inf``: one connection event per event-loop
-            turn while busy).
-        conn_interval_s: emulated BLE connection interval.
-        notifications_per_event: notifications per connection event (the budget when
-            ``budget_Bps`` is None).
-        budget_Bps: notification payload bytes per emulated second, overriding the per-event count.
-        fifo_bytes: the module's FIFO size.
-        max_mtu: the largest ATT MTU the server accepts (the host requests one).
-        firmware_kwargs: passed to :class:`~footnav.device.emulator.firmware.ShoeFirmware` (``steps=``,
-            ``ins=``, ``tof=``, ``baro=``, ``command_set=``, ``tick0=``, ``first_packet_number=``, ...).
+    Parameters
+    ----------
+    link
+        the virtual radio (the host's :class:`footnav.device.emulator.serving.ble_backend.BumbleAdapter` is on it too).
+    t_s
+        (n,) sample times at the unit's 1 kHz base rate, s, increasing.
+    acc_b_mps2
+        (n, 3) specific force, body frame, m/s².
+    gyr_b_radps
+        (n, 3) angular rate, body frame, rad/s.
+    name
+        advertised local name.
+    address
+        the peripheral's static random address.
+    profile
+        which UART service to serve and advertise.
+    speed
+        emulated seconds per wall second (``math.inf``: one connection event per event-loop turn while busy).
+    conn_interval_s
+        emulated BLE connection interval.
+    notifications_per_event
+        notifications per connection event (the budget when ``budget_Bps`` is None).
+    budget_Bps
+        notification payload bytes per emulated second, overriding the per-event count.
+    fifo_bytes
+        the module's FIFO size.
+    max_mtu
+        the largest ATT MTU the server accepts (the host requests one).
+    firmware_kwargs
+        passed to :class:`~footnav.device.emulator.firmware.ShoeFirmware` (``steps=``, ``ins=``, ``tof=``, ``baro=``,
+        ``command_set=``, ``tick0=``, ``first_packet_number=``, ...).
     """
 
     def __init__(
@@ -250,10 +262,12 @@ class BleShoePeripheral:
     async def disconnect(self, *, reset: bool = False) -> None:
         """Drop the connection from the unit's side (a BLE fault). Advertising restarts by itself.
 
-        Args:
-            reset: also stop streaming, as a unit that rebooted: the host must send the start command
-                again. Without it the firmware keeps streaming into the module, which discards the bytes
-                until a host subscribes again (package numbers keep counting: the host sees the gap).
+        Parameters
+        ----------
+        reset
+            also stop streaming, as a unit that rebooted: the host must send the start command again. Without it the
+            firmware keeps streaming into the module, which discards the bytes until a host subscribes again (package
+            numbers keep counting: the host sees the gap).
         """
         if reset:  # what a reboot leaves: no outputs, no processing (the ACKs die with the link)
             self.firmware.receive(protocol.processing_off_command() + protocol.outputs_off_command(), self._emu_t)

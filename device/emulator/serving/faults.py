@@ -27,11 +27,16 @@ _DATA, _ACK = 0xAA, 0xA0
 class WireFaults:
     """Fault rates; all zero is a perfect wire.
 
-    Attributes:
-        bit_error_rate: probability that any one bit of a data packet is flipped.
-        drop_rate: probability that a data packet is not sent.
-        duplicate_rate: probability that a data packet is sent twice in a row.
-        reorder_rate: probability that a data packet is sent after the one that follows it.
+    Attributes
+    ----------
+    bit_error_rate
+        probability that any one bit of a data packet is flipped.
+    drop_rate
+        probability that a data packet is not sent.
+    duplicate_rate
+        probability that a data packet is sent twice in a row.
+    reorder_rate
+        probability that a data packet is sent after the one that follows it.
     """
 
     bit_error_rate: float = 0.0
@@ -67,8 +72,10 @@ class FaultLog:
 def split_frames(data: bytes) -> list[bytes]:
     """Cut a firmware output chunk into its frames (data packets and 4-byte command ACKs).
 
-    Raises:
-        ValueError: the chunk is not a sequence of whole frames (the firmware never writes one).
+    Raises
+    ------
+    ValueError
+        the chunk is not a sequence of whole frames (the firmware never writes one).
     """
     frames: list[bytes] = []
     i, n = 0, len(data)
@@ -90,9 +97,12 @@ def split_frames(data: bytes) -> list[bytes]:
 class FaultInjector:
     """Applies :class:`WireFaults` to firmware output chunks, seeded and logged.
 
-    Args:
-        faults: the rates.
-        seed: seed of the random generator (the same seed and input give the same output).
+    Parameters
+    ----------
+    faults
+        the rates.
+    seed
+        seed of the random generator (the same seed and input give the same output).
     """
 
     def __init__(self, faults: WireFaults, seed: int = 0) -> None:

@@ -48,34 +48,56 @@ _TAIL_KEEP: Final = 4096
 class PtyShoeServer:
     """Serve an emulated unit on a pty.
 
-    Args:
-        t_s: (n,) sample times, s, increasing (the unit's 1 kHz base rate; dividers apply on top).
-        acc_b_mps2: (n, 3) specific force, body frame, m/s² (normal-IMU output).
-        gyr_b_radps: (n, 3) angular rate, body frame, rad/s.
-        speed: 1.0 = real time, paced by absolute deadlines, chunks every ≥1 ms; ``math.inf`` = as
-            fast as the reader takes them (and, in lossless mode, as fast as it ACKs).
-        chunk_interval_s: at finite speed, the shortest time between chunks of due packets.
-        tick0: 64 MHz tick of ``t_s[0]``; the default makes the uint32 counter wrap after 20 s.
-        first_packet_number: package number of the first packet (wraps at 2**16).
-        split_writes_max: if set, cut the byte stream into writes of random size 1..k, regardless of
-            packet boundaries (split and glued packets).
-        garbage_every: if set, insert 1..``garbage_max_len`` random bytes (about half the time starting
-            with a fake ``AA`` header) after every this many packets.
-        seed: seed for the fault generators.
-        record: keep every byte written, for :attr:`sent_bytes`.
-        imu_acc_b_mps2, imu_gyr_b_radps: (n, k, 3) per-IMU signals for raw output 0x28 (k = 1..4 or more).
-        ins: INS truth at ``t_s`` for INS-state output.
-        steps: stepwise-dead-reckoning packets (see :func:`footnav.device.emulator.scripts.steps_from_truth`).
-        tof, baro: extension-state readings.
-        command_set: firmware generation (the 2014 set answers only the old IDs).
-        resend_interval_s: lossless resend period (128 ms).
-        mcu_id: 15 bytes answered to command 0x04.
-        link_budget_bps: if set, never write faster than this many bytes per second.
-        faults: bit errors, dropped, duplicated and reordered packets (:mod:`.faults`); what was done
-            is in :attr:`fault_log`.
-        stall_every_s, stall_s: if set, stop writing for ``stall_s`` of every ``stall_every_s`` of wall
-            time (a host or hub that stops reading); the firmware keeps producing meanwhile.
-        temp_c: (n,) sensor temperature, °C, for the raw output's temperature block.
+    Parameters
+    ----------
+    t_s
+        (n,) sample times, s, increasing (the unit's 1 kHz base rate; dividers apply on top).
+    acc_b_mps2
+        (n, 3) specific force, body frame, m/s² (normal-IMU output).
+    gyr_b_radps
+        (n, 3) angular rate, body frame, rad/s.
+    speed
+        1.0 = real time, paced by absolute deadlines, chunks every ≥1 ms; ``math.inf`` = as fast as the reader takes
+        them (and, in lossless mode, as fast as it ACKs).
+    chunk_interval_s
+        at finite speed, the shortest time between chunks of due packets.
+    tick0
+        64 MHz tick of ``t_s[0]``; the default makes the uint32 counter wrap after 20 s.
+    first_packet_number
+        package number of the first packet (wraps at 2**16).
+    split_writes_max
+        if set, cut the byte stream into writes of random size 1..k, regardless of packet boundaries (split and glued
+        packets).
+    garbage_every
+        if set, insert 1..``garbage_max_len`` random bytes (about half the time starting with a fake ``AA`` header)
+        after every this many packets.
+    seed
+        seed for the fault generators.
+    record
+        keep every byte written, for :attr:`sent_bytes`.
+    imu_acc_b_mps2, imu_gyr_b_radps
+        (n, k, 3) per-IMU signals for raw output 0x28 (k = 1..4 or more).
+    ins
+        INS truth at ``t_s`` for INS-state output.
+    steps
+        stepwise-dead-reckoning packets (see :func:`footnav.device.emulator.scripts.steps_from_truth`).
+    tof, baro
+        extension-state readings.
+    command_set
+        firmware generation (the 2014 set answers only the old IDs).
+    resend_interval_s
+        lossless resend period (128 ms).
+    mcu_id
+        15 bytes answered to command 0x04.
+    link_budget_bps
+        if set, never write faster than this many bytes per second.
+    faults
+        bit errors, dropped, duplicated and reordered packets (:mod:`.faults`); what was done is in :attr:`fault_log`.
+    stall_every_s, stall_s
+        if set, stop writing for ``stall_s`` of every ``stall_every_s`` of wall time (a host or hub that stops reading);
+        the firmware keeps producing meanwhile.
+    temp_c
+        (n,) sensor temperature, °C, for the raw output's temperature block.
     """
 
     def __init__(

@@ -1,0 +1,141 @@
+"""Replay of a capture's bytes: one unit's device -> host reads played back as a :class:`ByteLink`.
+
+The unit driver reads a replay link as it reads a live port, so a replay frames, orders and decodes
+the captured bytes exactly as the live session did (the capture format:
+:mod:`footnav.device.files.capture`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import time
+from collections import deque
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from footnav.device.files.capture import CaptureInfo, CaptureMessage, ReadState, iter_capture
+from footnav.pipeline.errors import InputFormatError
+
+
+class CaptureReplayLink:
+    """A :class:`footnav.device.links.base.ByteLink` that returns one unit's captured device -> host bytes, one
+    captured read per :meth:`read`, so the unit driver frames and batches them exactly as it did live.
+
+    Host timestamps: the driver stamps a batch with ``time.monotonic_ns()`` right after ``read``
+    returns. :meth:`captured_ns` maps such a replay-time stamp back to the captured read's host time,
+    so replayed estimates carry the live session's ``host_ns``.
+
+    Parameters
+    ----------
+    path
+        the capture.
+    foot
+        which unit.
+    speed
+        1.0 = the captured pace, N = N times faster, ``math.inf`` = as fast as possible.
+    paced
+        False returns reads at once until :attr:`paced` is set (a replay window's lead-in: decoded, not navigated, not
+        waited for).
+    clock_origin
+        ``(monotonic_ns at replay start, captured ns at replay start)`` shared by all feet of one replay so they stay in
+        step; default: set at the first read.
+    on_progress
+        called with (bytes read, file size) now and then.
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        foot: str,
+        *,
+        speed: float = 1.0,
+        paced: bool = True,
+        clock_origin: list[int] | None = None,
+        on_progress: Callable[[int, int], None] | None = None,
+    ) -> None:
+        self.path = Path(path)
+        self.foot = foot
+        self.speed = speed
+        self.paced = paced
+        self.state = ReadState()
+        self.events: list[dict[str, Any]] = []
+        """Events of this unit met so far (JSON objects)."""
+        self.reads = 0
+        self._origin = clock_origin if clock_origin is not None else []
+        self._on_progress = on_progress
+        self._it = iter_capture(self.path, self.state)
+        self._stamps: deque[tuple[int, int]] = deque()  # (replay monotonic ns at return, captured ns)
+        self._closed = False
+        self.writes: list[bytes] = []
+        """Bytes the host wrote during the replay (nothing is sent anywhere)."""
+
+    @property
+    def name(self) -> str:
+        return f"{self.path.name} [{self.foot}]"
+
+    def _next_rx(self) -> CaptureMessage | None:
+        for item in self._it:
+            if isinstance(item, CaptureInfo):
+                if self.foot not in item.feet:
+                    known = ", ".join(item.feet) or "none"
+                    raise InputFormatError(f"{self.path} has no unit {self.foot!r} (units: {known})")
+                continue
+            if item.foot != self.foot:
+                continue
+            if item.direction == "events":
+                with contextlib.suppress(json.JSONDecodeError):
+                    self.events.append(json.loads(item.data))
+                continue
+            if item.direction != "rx":
+                continue
+            return item
+        return None
+
+    async def read(self) -> bytes:
+        """The next captured read; ``b""`` at the end of the capture or the window."""
+        if self._closed:
+            return b""
+        item = self._next_rx()
+        if item is None:
+            self._closed = True
+            return b""
+        if self.paced and not self._origin:
+            self._origin[:] = [time.monotonic_ns(), item.host_ns]
+        if not self.paced:
+            pass  # a window's lead-in: decoded at once
+        elif self.speed != float("inf"):
+            due_ns = self._origin[0] + (item.host_ns - self._origin[1]) / self.speed
+            delay = (due_ns - time.monotonic_ns()) / 1e9
+            if delay > 0:
+                await asyncio.sleep(delay)
+        elif self.reads % 64 == 0:
+            await asyncio.sleep(0)  # let the other foot and the sinks run
+        self.reads += 1
+        if self._on_progress is not None and self.reads % 256 == 0:
+            self._on_progress(self.state.bytes_read, self.state.size)
+        self._stamps.append((time.monotonic_ns(), item.host_ns))
+        return item.data
+
+    def captured_ns(self, replay_ns: int) -> int:
+        """The captured host time of the read that a driver stamped ``replay_ns`` (see class doc).
+
+        Stamps must be asked for in increasing order (batches arrive in order).
+        """
+        stamps = self._stamps
+        while len(stamps) > 1 and stamps[1][0] <= replay_ns:
+            stamps.popleft()
+        if not stamps:
+            return replay_ns
+        return stamps[0][1]
+
+    async def write(self, data: bytes) -> None:
+        """Commands go nowhere in a replay; kept for inspection."""
+        self.writes.append(bytes(data))
+
+    async def close(self) -> None:
+        self._closed = True
+        with contextlib.suppress(Exception):
+            self._it.close()  # type: ignore[attr-defined]
