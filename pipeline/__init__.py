@@ -1,6 +1,7 @@
 """Estimation on streamed samples: detectors, the error-state Kalman filter, and the stage runner.
 
 Estimators here are pure and synchronous (numpy, numba); only ``footnav.pipeline.runner`` knows asyncio.
+Re-exported: the sample and estimate types, the errors, the stage runner and the trajectory metrics.
 """
 
 import hashlib
@@ -8,6 +9,30 @@ import os
 import shutil
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+from footnav.pipeline._lazy import lazy_exports
+
+if TYPE_CHECKING:
+    from .errors import FootnavError as FootnavError
+    from .errors import InputFormatError as InputFormatError
+    from .metrics import AteResult as AteResult
+    from .metrics import armse_2d_pyshoe as armse_2d_pyshoe
+    from .metrics import ate as ate
+    from .metrics import loop_closure_error as loop_closure_error
+    from .metrics import path_length_m as path_length_m
+    from .nav_types import ClearanceSeries as ClearanceSeries
+    from .nav_types import NavBatch as NavBatch
+    from .nav_types import SmoothedSpan as SmoothedSpan
+    from .nav_types import concat_batches as concat_batches
+    from .runner import AidedNavigator as AidedNavigator
+    from .runner import BatchNavigator as BatchNavigator
+    from .runner import NavSink as NavSink
+    from .runner import SourceItem as SourceItem
+    from .runner import run_pipeline as run_pipeline
+    from .samples import ImuBatch as ImuBatch
+else:  # type checkers read the imports above; at run time the same names are lazy attributes
+    __all__, __getattr__, __dir__ = lazy_exports(__name__, __file__)
 
 
 def sources_digest(root: Path) -> str:

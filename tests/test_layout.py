@@ -126,7 +126,7 @@ def test_no_import_cycles_between_modules() -> None:
 
 def test_building_the_parser_imports_no_numerics_or_rerun() -> None:
     code = (
-        "import sys; from footnav.app.cli import build_parser; build_parser(); "
+        "import sys; from footnav.app.parser import build_parser; build_parser(); "
         "heavy = ('numpy', 'numba', 'scipy', 'rerun', 'serial', 'bleak', 'mcap'); "
         "print(' '.join(m for m in heavy if m in sys.modules))"
     )

@@ -1,1 +1,20 @@
 """Rerun: entity paths, the default blueprint, archetype conversion and the logger thread."""
+
+from typing import TYPE_CHECKING
+
+from footnav.pipeline._lazy import lazy_exports
+
+if TYPE_CHECKING:
+    from .blueprint import build_blueprint as build_blueprint
+    from .dual_imu import DualRunView as DualRunView
+    from .dual_imu import save_dual_runs as save_dual_runs
+    from .logger import LoggerStats as LoggerStats
+    from .logger import RerunLogger as RerunLogger
+    from .outputs import Output as Output
+    from .outputs import SessionViews as SessionViews
+    from .outputs import open_session_views as open_session_views
+    from .paths import DualPaths as DualPaths
+    from .paths import FootPaths as FootPaths
+    from .sinks import ViewerStartError as ViewerStartError
+else:  # type checkers read the imports above; at run time the same names are lazy attributes
+    __all__, __getattr__, __dir__ = lazy_exports(__name__, __file__)

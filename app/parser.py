@@ -1,0 +1,364 @@
+"""The ``footnav`` command line's parser: every command and option, with no numerics, Rerun or command
+module imported (those load when a command runs, ``footnav.app.cli``)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from footnav.app.choices import AXIS_ERRORS, IMU_GRADES, PATHS, PROFILES, RECORDING_FORMATS
+
+if TYPE_CHECKING:
+    from typing import TypeAlias
+
+    Commands: TypeAlias = argparse._SubParsersAction[argparse.ArgumentParser]  # the sub-command table
+    Options: TypeAlias = argparse._ActionsContainer  # a parser or an argument group
+
+
+def _positive(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return value
+
+
+def _pace(text: str) -> float:
+    if text == "max":
+        return math.inf
+    return _positive(text.rstrip("x"))
+
+
+def _seconds(text: str) -> float:
+    value = float(text)
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return value
+
+
+def _add_stance_arg(p: argparse.ArgumentParser, *, default: str | None) -> None:
+    """``--stance``: the zero-velocity detector of ToF units (``footnav.pipeline.stance.height_detector``)."""
+    p.add_argument(
+        "--stance",
+        choices=("inertial", "height", "and", "or"),
+        default=default,
+        help="ToF units: stance from the inertial detector, from the foot's height and angular rate, "
+        "or both (and/or); default: inertial" + ("" if default else ", or as recorded"),
+    )
+
+
+def _add_config_args(p: argparse.ArgumentParser, *, profile: bool = True) -> None:
+    p.add_argument(
+        "--config", type=Path, metavar="FILE", help="configuration file (default: ./footnav.toml if present)"
+    )
+    if profile:
+        p.add_argument(
+            "--profile",
+            metavar="NAME",
+            help=f"unit noise profile: {', '.join(PROFILES)} or [profiles.NAME]",
+        )
+
+
+def _add_step_smoothing_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--step-smoothing",
+        action="store_true",
+        default=None,
+        help="also show each step smoothed once it has ended ([filter] step_smoothing)",
+    )
+
+
+def _add_output_args(p: argparse.ArgumentParser, *, capture: bool) -> None:
+    p.add_argument("--save", type=Path, metavar="FILE.rrd", help="also write the recording to this file")
+    p.add_argument("--no-viewer", action="store_true", help="do not open a viewer (save only)")
+    p.add_argument("--web", action="store_true", help="serve the web viewer on 127.0.0.1 and print its URL")
+    if capture:
+        p.add_argument("--sessions", type=Path, metavar="DIR", help="capture folder (default: ./sessions)")
+        p.add_argument("--no-capture", action="store_true", help="do not write a capture file")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The whole parser; it imports no numerics, Rerun or command module (those load when a command runs)."""
+    parser = argparse.ArgumentParser(prog="footnav", description="Foot-mounted inertial navigation, live in Rerun.")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log debug detail to stderr")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    _add_demo_command(sub)
+    _add_live_command(sub)
+    _add_calibrate_command(sub)
+    _add_scan_command(sub)
+    _add_replay_command(sub)
+    _add_export_command(sub)
+    _add_evaluate_command(sub)
+    _add_experiment_command(sub)
+    _add_config_command(sub)
+    return parser
+
+
+def _add_demo_command(sub: Commands) -> None:
+    demo = sub.add_parser("demo", help="run everything against the built-in emulated shoe (no hardware)")
+    demo.add_argument("--path", choices=PATHS, default="rectangle", help="walking path (default: rectangle, 18 × 9 m)")
+    demo.add_argument(
+        "--duration", type=_positive, default=60.0, metavar="S", help="walk duration in seconds (default 60)"
+    )
+    demo.add_argument(
+        "--speed", type=_positive, default=1.4, metavar="M/S", help="walking speed, 1.2-1.8 m/s (default 1.4)"
+    )
+    demo.add_argument(
+        "--grade",
+        choices=IMU_GRADES,
+        default=None,
+        help="emulated sensor grade (default mpu6500x4; icm20948 with --dual-imu)",
+    )
+    demo.add_argument(
+        "--axis-errors",
+        choices=AXIS_ERRORS,
+        default=None,
+        help="scale-factor and cross-axis errors of the emulated IMU (default none; with --tof "
+        "gyro-bias-calibrated, the multi-sensor platform's unit: its gyroscope had only its bias calibrated and "
+        "keeps its datasheet scale and cross-axis tolerances)",
+    )
+    _add_output_args(demo, capture=True)
+    _add_config_args(demo)
+    _add_step_smoothing_arg(demo)
+    _add_stance_arg(demo, default="inertial")
+    demo.add_argument("--feet", type=int, choices=(1, 2), default=1, help="emulated shoes: 1, or 2 (left and right)")
+    demo.add_argument("--pace", type=_pace, default=1.0, metavar="1x|Nx|max", help="emulator speed (default real time)")
+    demo.add_argument("--seed", type=int, default=1, help="random seed of the emulated sensor errors")
+    demo.add_argument(
+        "--miscalibrated",
+        action="store_true",
+        help="the emulated miscalibrated unit of `calibrate --demo` (its calibration applies if made)",
+    )
+    demo.add_argument(
+        "--dual-imu",
+        action="store_true",
+        help="a dual-IMU board (two IMUs on one PCB, raw output 0x28, IMU mask 0b11) navigated by footnav's "
+        "dual-IMU filter",
+    )
+    demo.add_argument(
+        "--lever-arm",
+        type=float,
+        nargs=3,
+        default=None,
+        metavar=("X", "Y", "Z"),
+        help="with --dual-imu: IMU 2's position in IMU 1's axes, m (default 0.01 0.01 0)",
+    )
+    demo.add_argument(
+        "--board-lever-arm",
+        type=float,
+        nargs=3,
+        default=None,
+        metavar=("X", "Y", "Z"),
+        help="with --dual-imu: where the emulated board really has IMU 2, m (default: --lever-arm); "
+        "a different value shows the lever-arm check",
+    )
+    demo.add_argument(
+        "--tof",
+        action="store_true",
+        help="emulate the multi-sensor unit: three ToF range sensors and a barometer, fused for foot clearance",
+    )
+
+
+def _add_live_command(sub: Commands) -> None:
+    live = sub.add_parser("live", help="navigate one connected unit, or two (--left/--right), over USB serial or BLE")
+    live.add_argument("--port", help="serial port of the unit, e.g. /dev/ttyACM0 (or ble:NAME)")
+    live.add_argument(
+        "--ble",
+        nargs="?",
+        const="",
+        metavar="NAME|ADDRESS",
+        help="the unit over Bluetooth LE, by advertised name or address (alone: the first unit found; "
+        "`footnav scan` lists them)",
+    )
+    live.add_argument("--left", metavar="PORT|ble:NAME", help="the left-foot unit: serial port or ble:NAME")
+    live.add_argument("--right", metavar="PORT|ble:NAME", help="the right-foot unit: serial port or ble:NAME")
+    live.add_argument(
+        "--tof",
+        action="store_true",
+        help="a ToF multi-sensor unit: switch on its ToF and barometer states, fuse the ranges",
+    )
+    live.add_argument(
+        "--dual-imu",
+        action="store_true",
+        help="a dual-IMU board: stream both IMUs (raw output 0x28, mask 0b11) to the dual-IMU filter",
+    )
+    live.add_argument(
+        "--lever-arm",
+        type=float,
+        nargs=3,
+        default=None,
+        metavar=("X", "Y", "Z"),
+        help="with --dual-imu: IMU 2's position in IMU 1's axes, m (default 0.01 0.01 0)",
+    )
+    _add_config_args(live)
+    _add_step_smoothing_arg(live)
+    _add_stance_arg(live, default="inertial")
+    live.add_argument(
+        "--rate-divider",
+        type=int,
+        default=None,
+        choices=range(7),
+        metavar="K",
+        help="output every 2**K samples of the 1 kHz base rate (default 0: 1 kHz on serial, 2: 250 Hz on BLE)",
+    )
+    _add_output_args(live, capture=True)
+
+
+def _add_calibrate_command(sub: Commands) -> None:
+    cal = sub.add_parser(
+        "calibrate",
+        help="field calibration of the unit's IMU (icosahedron procedure); saved by MCU id, applied automatically",
+    )
+    cal_src = cal.add_mutually_exclusive_group(required=True)
+    cal_src.add_argument("--port", help="serial port of the unit, e.g. /dev/ttyACM0")
+    cal_src.add_argument(
+        "--ble", nargs="?", const="", metavar="NAME|ADDRESS", help="the unit over Bluetooth LE (alone: the first found)"
+    )
+    cal_src.add_argument(
+        "--capture", type=Path, metavar="FILE", help="fit from a capture recorded by an earlier `footnav calibrate`"
+    )
+    cal_src.add_argument(
+        "--demo", action="store_true", help="an emulated miscalibrated unit that turns through the faces by itself"
+    )
+    cal.add_argument(
+        "--imu-mask", type=lambda t: int(t, 0), default=0x0F, metavar="MASK",
+        help="IMUs whose raw outputs are averaged (default 0x0F: the four of a MIMU board)",
+    )  # fmt: skip
+    cal.add_argument(
+        "--rate-divider", type=int, default=None, choices=range(7), metavar="K",
+        help="raw output every 2**K samples of the 1 kHz base rate (default 0 on serial, 3: 125 Hz over BLE)",
+    )  # fmt: skip
+    cal.add_argument(
+        "--hold", type=_positive, default=None, metavar="S",
+        help="still time averaged per face (default 2 s at 1 kHz, 8 s at 125 Hz over BLE)",
+    )  # fmt: skip
+    cal.add_argument(
+        "--no-temperature",
+        action="store_true",
+        help="if the temperature barely changes, fit the 9-parameter model without temperature terms",
+    )
+    cal.add_argument(
+        "--pace", type=_pace, default=10.0, metavar="1x|Nx|max", help="--demo: emulator speed (default 10x)"
+    )
+    cal.add_argument("--sessions", type=Path, metavar="DIR", help="capture folder (default: ./sessions)")
+    cal.add_argument("--no-capture", action="store_true", help="do not write a capture of the procedure")
+    _add_config_args(cal, profile=False)
+
+
+def _add_scan_command(sub: Commands) -> None:
+    scan = sub.add_parser("scan", help="list serial ports and BLE devices that look like shoe units")
+    scan.add_argument("--timeout", type=_positive, default=5.0, metavar="S", help="how long to scan BLE (default 5 s)")
+
+
+def _add_replay_command(sub: Commands) -> None:
+    replay = sub.add_parser(
+        "replay", help="show a capture (.mcap) or a recording from another tool (CSV, .mat, log) in Rerun"
+    )
+    replay.add_argument(
+        "file",
+        type=Path,
+        metavar="FILE",
+        help="a capture written by footnav live/demo, or a PyShoe .mat, x-io CSV, OpenShoe log or CSV",
+    )
+    replay.add_argument("--speed", type=_pace, default=math.inf, metavar="1x|Nx|max", help="replay pace (default max)")
+    replay.add_argument("--start", type=_seconds, default=0.0, metavar="S", help="start S seconds into the capture")
+    replay.add_argument("--end", type=_seconds, default=math.inf, metavar="S", help="stop S seconds into the capture")
+    replay.add_argument(
+        "--without-tof",
+        action="store_true",
+        help="leave the ToF readings out (the inertial-only result of the same recording)",
+    )
+    _add_config_args(replay)
+    _add_step_smoothing_arg(replay)
+    _add_stance_arg(replay, default=None)
+    recording = replay.add_argument_group("recordings from other tools")
+    recording.add_argument(
+        "--format", choices=RECORDING_FORMATS, help="recording format (default: detected from the file)"
+    )
+    recording.add_argument("--columns", metavar="SPEC", help="for a generic CSV: as for export")
+    recording.add_argument(
+        "--smooth", action="store_true", help="the RTS-smoothed track of the whole recording instead of the causal one"
+    )
+    _add_levels_arg(recording)
+    _add_output_args(replay, capture=False)
+
+
+def _add_export_command(sub: Commands) -> None:
+    export = sub.add_parser("export", help="navigate a recording and write one CSV row per sample")
+    export.add_argument(
+        "input", type=Path, metavar="INPUT", help="a PyShoe .mat, x-io CSV, OpenShoe log, CSV, or a footnav capture"
+    )
+    export.add_argument("-o", "--output", type=Path, required=True, metavar="TRACK.csv", help="where to write")
+    export.add_argument(
+        "--steps",
+        type=Path,
+        metavar="STEPS.csv",
+        help="also write one row per step: displacement, heading change and their covariance (OpenShoe's "
+        "stepwise output), length, duration, clearance",
+    )
+    _add_recording_args(export)
+
+
+def _add_evaluate_command(sub: Commands) -> None:
+    evaluate = sub.add_parser("evaluate", help="accuracy on recordings with ground truth or a closed loop")
+    evaluate.add_argument("paths", type=Path, nargs="+", metavar="PATH", help="recordings, or folders of them")
+    _add_smooth_arg(evaluate)
+    _add_levels_arg(evaluate)
+
+
+def _add_experiment_command(sub: Commands) -> None:
+    # the experiments' own options are parsed by run_experiment, which imports their modules
+    experiment = sub.add_parser(
+        "experiment", add_help=False, help="run a reproducible emulator experiment and print its table"
+    )
+    experiment.set_defaults(experiment_argv=[])
+
+
+def _add_config_command(sub: Commands) -> None:
+    config = sub.add_parser("config", help="show the effective configuration and where each value came from")
+    _add_config_args(config)
+    config.add_argument("--rate-divider", type=int, default=None, choices=range(7), metavar="K")
+    config.add_argument("--sessions", type=Path, metavar="DIR", help="capture folder")
+    config.add_argument("--no-capture", action="store_true", help="as the live option")
+
+
+def _add_recording_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--format", choices=RECORDING_FORMATS, help="recording format (default: detected from the file)"
+    )
+    parser.add_argument(
+        "--columns",
+        metavar="SPEC",
+        help="for a generic CSV: time=COL[:s|ms|us|ns],acc=X;Y;Z[:m/s2|g|mg],gyr=X;Y;Z[:rad/s|deg/s],profile=NAME",
+    )
+    parser.add_argument("--profile", choices=PROFILES, help="unit profile (default: the format's sensor)")
+    _add_smooth_arg(parser)
+    _add_levels_arg(parser)
+
+
+def _add_smooth_arg(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument(
+        "--smooth",
+        action="store_const",
+        const="whole",
+        help="the RTS-smoothed solution of the whole recording instead of the causal filter's",
+    )
+    group.add_argument(
+        "--step-smoothing",
+        dest="smooth",
+        action="store_const",
+        const="step",
+        help="each step smoothed once it has ended, as a --step-smoothing session shows it",
+    )
+
+
+def _add_levels_arg(parser: Options) -> None:
+    parser.add_argument(
+        "--no-stance-levels",
+        dest="stance_levels",
+        action="store_false",
+        help="zero-velocity aiding alone: no stance height levels",
+    )
