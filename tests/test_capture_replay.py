@@ -179,6 +179,8 @@ def test_foreign_files_name_what_was_expected(tmp_path: Path) -> None:
         with pytest.raises(InputFormatError, match="expected a footnav capture") as err:
             replay(path)
         assert needle in str(err.value)
+    # the command line takes files that are not captures as recordings from other tools: it names
+    # what those must hold
     proc = subprocess.run(
         [sys.executable, "-m", "footnav.app", "replay", str(csv), "--no-viewer"],
         capture_output=True,
@@ -186,7 +188,7 @@ def test_foreign_files_name_what_was_expected(tmp_path: Path) -> None:
         check=False,
     )
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
-    assert "unsupported format" in proc.stderr and "expected a footnav capture (.mcap" in proc.stderr
+    assert "expected an x-io CSV with columns Time (s), Gyroscope X (deg/s)" in proc.stderr
 
 
 def test_kill_9_leaves_a_readable_capture(tmp_path: Path) -> None:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import re
-import socket
 import subprocess
 import sys
 import time
@@ -18,10 +17,9 @@ import pytest
 from footnav.device.files.capture import read_capture_info
 from footnav.pipeline.gait.events import step_onsets
 from footnav.views.outputs import open_session_views
-from footnav.views.sinks import LOOPBACK, viewer_binary
+from footnav.views.screenshot import LAVAPIPE_ICD, screenshot
+from footnav.views.sinks import LOOPBACK
 from rerun.chunk import RrdReader
-
-LAVAPIPE_ICD = Path("/usr/share/vulkan/icd.d/lvp_icd.x86_64.json")
 
 
 def _footnav(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
@@ -184,58 +182,17 @@ def test_unwritable_recording_path_lets_the_session_carry_on(tmp_path: Path) -> 
     assert len(list(tmp_path.glob("*.mcap"))) == 1  # the capture is still written
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind((LOOPBACK, 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.mark.skipif(
     not LAVAPIPE_ICD.exists(),
     reason=f"no software Vulkan ({LAVAPIPE_ICD} missing): apt-get install mesa-vulkan-drivers (.ci/run does)",
 )
 def test_headless_screenshot_of_the_default_blueprint(demo20: Path, tmp_path: Path) -> None:
-    """Render the demo recording with the default blueprint in a headless viewer (software Vulkan)
-    and check that the 3D view and the plots are not blank.
-
-    ``rerun --headless --screenshot-to`` shoots before the recording has loaded (empty plots), so the
-    same headless viewer is driven through its control API: open the file, wait until its time range
-    is loaded, then take the screenshot.
-    """
+    """Render the demo recording with the default blueprint in a headless viewer (software Vulkan,
+    ``footnav.views.screenshot``) and check that the 3D view and the plots are not blank."""
     from PIL import Image
-    from rerun.experimental import ViewerClient
 
-    port = _free_port()
-    env = {**os.environ, "HOME": str(tmp_path), "XDG_CONFIG_HOME": str(tmp_path), "XDG_DATA_HOME": str(tmp_path)}
-    cmd = [str(viewer_binary()), "--headless", "--bind", LOOPBACK, "--port", str(port)]
-    cmd += ["--window-size", "1600x900", "--hide-welcome-screen"]
-    viewer = subprocess.Popen(
-        cmd,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        env=env,
-    )
     shot = tmp_path / "shot.png"
-    try:
-        deadline = time.monotonic() + 60
-        client = None
-        while client is None and time.monotonic() < deadline:
-            try:
-                client = ViewerClient.connect(f"rerun+http://{LOOPBACK}:{port}/proxy")
-            except Exception:
-                time.sleep(0.3)
-        assert client is not None, "the headless viewer did not come up"
-        client.open(str(demo20))
-        while time.monotonic() < deadline:
-            recs = client.get_state().recordings
-            if recs and recs[0].timelines and recs[0].timelines[0].end and recs[0].timelines[0].end >= 19.9e9:
-                break
-            time.sleep(0.3)
-        time.sleep(3.0)  # a few frames for the views to pick the data up
-        client.save_screenshot(str(shot))
-    finally:
-        viewer.terminate()
-        viewer.wait(20)
+    screenshot(demo20, shot, end_s=20.0, timeout_s=60.0)
     img = np.asarray(Image.open(shot).convert("RGB")).astype(np.int32)
     h, w, _ = img.shape
     # Layout (views/blueprint.py): 3D on the left 3/5, plots on the right 2/5; skip bars and toasts.

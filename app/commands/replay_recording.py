@@ -1,0 +1,122 @@
+"""``footnav replay RECORDING``: a recording from another tool navigated and shown in Rerun.
+
+The recording (PyShoe ``.mat``, x-io CSV, OpenShoe log, generic CSV: ``footnav.device.files.recordings``)
+is navigated whole, exactly as ``footnav export`` navigates it (``navigate_recording``: the causal
+filter, or a smoother with ``smooth``), and its track goes to the same Rerun views as a live session's.
+Where the recording has ground truth (the PyShoe VICON trials), the truth is shown too, turned and
+moved onto the estimate by the least-squares yaw and translation fit that ``footnav evaluate`` uses
+(``footnav.pipeline.metrics.ate``).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from footnav.app.commands.export import navigate_recording
+from footnav.app.feet import notice
+from footnav.app.status import input_handling
+from footnav.device.files.recordings import CsvMapping, Recording, load_recording
+from footnav.pipeline.errors import InputFormatError
+from footnav.pipeline.gait.events import GaitEventTracker
+from footnav.pipeline.metrics import ate, path_length_m
+from footnav.pipeline.nav_types import NavBatch
+from footnav.views.outputs import SessionViews, open_session_views
+from numpy.typing import NDArray
+
+PUT_TIMEOUT_S = 60.0
+"""How long a batch may wait for room in a Rerun logger's queue (a file is written as fast as it can)."""
+
+
+@dataclass(frozen=True)
+class RecordingReplayOptions:
+    """What ``footnav replay`` was asked for, for a recording from another tool.
+
+    Attributes
+    ----------
+    fmt, columns
+        the recording's format (None: detected) and, for a generic CSV, its column mapping
+        (``CsvMapping.parse`` grammar).
+    profile
+        the unit profile (None: the format's sensor).
+    smooth
+        None (causal), ``whole`` or ``step`` (``footnav.app.commands.export.SMOOTHING``).
+    """
+
+    path: Path
+    fmt: str | None = None
+    columns: str | None = None
+    profile: str | None = None
+    smooth: str | None = None
+    stance_levels: bool = True
+    save: Path | None = None
+    viewer: bool = True
+    web: bool = False
+
+
+def truth_on_estimate(est_pos_m: NDArray[np.float64], gt_pos_m: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(n, 3) ground truth turned about z and moved onto the (n, 3) estimate by the fit of
+    :func:`footnav.pipeline.metrics.ate` (mirrored back when the fit mirrored the estimate)."""
+    fit = ate(est_pos_m, gt_pos_m, mirror_test=True)
+    est = est_pos_m * np.array([1.0, -1.0, 1.0]) if fit.mirrored else est_pos_m
+    c, s = math.cos(fit.yaw_rad), math.sin(fit.yaw_rad)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    # the fit maps est to gt: gt ≈ (est − mean est) Rᵀ + mean gt; its inverse maps gt onto est
+    truth = (gt_pos_m - gt_pos_m.mean(axis=0)) @ rot + est.mean(axis=0)
+    return truth * np.array([1.0, -1.0, 1.0]) if fit.mirrored else truth
+
+
+def run_recording_replay(opts: RecordingReplayOptions) -> int:
+    """Navigate the recording and show it; returns the exit code.
+
+    Raises
+    ------
+    InputFormatError
+        the file is not a recording footnav reads (the message names what was expected).
+    FootnavError
+        the recording never stands still, so it cannot be aligned.
+    """
+    try:
+        rec = load_recording(opts.path, opts.fmt, CsvMapping.parse(opts.columns) if opts.columns else None)
+    except InputFormatError as exc:
+        if "unknown recording format" not in str(exc):
+            raise
+        raise InputFormatError(f"{exc}; or a footnav capture (.mcap)") from None
+    how = {None: "causal filter", "whole": "RTS-smoothed", "step": "smoothed step by step"}[opts.smooth]
+    print(
+        f"replaying {opts.path} ({rec.format} recording, {len(rec)} samples at {rec.rate_hz:.0f} Hz, "
+        f"profile {opts.profile or rec.profile}, {how})",
+        file=sys.stderr,
+    )
+    nav, stats = navigate_recording(rec, opts.profile, opts.smooth, opts.stance_levels)
+    views, notes = open_session_views(
+        save=opts.save, want_viewer=opts.viewer, web=opts.web, recording_id=f"replay-{rec.name}", notice=notice
+    )
+    for note in notes:
+        print(note, file=sys.stderr)
+    if views is not None:
+        _show(views, rec, nav, stats.samples_before_alignment)
+        for note in views.close():
+            notice(note)
+    skipped = stats.samples_before_alignment
+    handled = f"; {h}" if (h := input_handling(stats)) else ""
+    print(
+        f"samples navigated: {len(nav)} of {len(rec)}"
+        + (f" ({skipped} before the first still period)" if skipped else "")
+        + f"; distance {path_length_m(nav.pos_n_m[:: max(1, round(rec.rate_hz / 20))]):.2f} m{handled}"
+    )
+    return 0
+
+
+def _show(views: SessionViews, rec: Recording, nav: NavBatch, skipped: int) -> None:
+    """The track, the aligned truth (if any) and the recording's notes on every view."""
+    if rec.gt_pos_m is not None:
+        gt = rec.gt_pos_m[skipped:] - rec.gt_pos_m[skipped]
+        views.log_truth(truth_on_estimate(nav.pos_n_m, gt), t_s=nav.t_s)
+    views.log_event(f"{rec.format} recording {rec.name}: {len(rec)} samples at {rec.rate_hz:.0f} Hz", t_s=0.0)
+    for note in rec.notes:
+        views.log_event(note, t_s=0.0)
+    views.put(GaitEventTracker().annotate(nav), timeout_s=PUT_TIMEOUT_S)
