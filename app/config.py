@@ -163,13 +163,13 @@ class Config:
             if sec != section:
                 out.append(f"{'' if not out else chr(10)}[{sec}]")
                 section = sec
-            out.append(f"{name + ' = ' + _toml(s.value):<{width + 24}}  # {s.source}")
+            out.append(f"{name + ' = ' + toml_value(s.value):<{width + 24}}  # {s.source}")
         prof, src = self.profiles.get(self["unit.profile"], (None, ""))
         if prof is not None:
             out.append(f"\n# unit profile {prof.name!r} in use ({src})")
             out.append(f"[profiles.{prof.name}]")
             for name in _PROFILE_FIELDS:
-                out.append(f"{name} = {_toml(getattr(prof, name))}")
+                out.append(f"{name} = {toml_value(getattr(prof, name))}")
         return out
 
     def to_json(self) -> dict[str, Any]:
@@ -188,9 +188,10 @@ def _json(value: Any) -> Any:
     return [_json(v) for v in value] if isinstance(value, tuple) else value
 
 
-def _toml(value: Any) -> str:
+def toml_value(value: Any) -> str:
+    """``value`` as TOML writes it (``true``, ``"text"``, ``[x, y, z]``)."""
     if isinstance(value, tuple):
-        return "[" + ", ".join(_toml(v) for v in value) + "]"
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):

@@ -2,7 +2,7 @@
 step once it has ended) and RTS-smoothed, in one command.
 
     .venv/bin/python -m benchmarks.accuracy [--data ../shared/data] [--no-emulator] [--no-smooth] [--no-real]
-        [--axis-errors none|gyro-bias-calibrated]
+        [--axis-errors none|gyro-bias-calibrated] [--json FILE]
 
 Real recordings (``../shared/data``, see its DATA.md): the PyShoe VICON trials (ARMSE-2D as the
 PyShoe authors compute it, ``footnav.pipeline.metrics.armse_2d_pyshoe``, and ATE-3D after a yaw +
@@ -22,6 +22,7 @@ a file. The ground truth is used only to measure.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import time
 from pathlib import Path
@@ -75,6 +76,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-smooth", action="store_true")
     ap.add_argument("--no-real", action="store_true", help="the emulated walks only")
     ap.add_argument("--axis-errors", choices=sorted(AXIS_ERRORS), default="none", help="of the emulated IMU")
+    ap.add_argument(
+        "--json", type=Path, metavar="FILE", help="also write the real recordings' rows as JSON (docs/plots.py)"
+    )
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     modes: list[str | None] = [] if args.no_real else [None] if args.no_smooth else [None, "step", "whole"]
@@ -99,6 +103,12 @@ def main(argv: list[str] | None = None) -> int:
             f"{label:<13}: PyShoe ARMSE-2D mean {a.mean():.4f} median {np.median(a):.3f} max {a.max():.3f} m;  "
             f"{loop_txt}"
         )
+    if args.json is not None:
+        fields = ("name", "format", "armse_2d_m", "ate_3d_m", "loop_3d_m", "loop_2d_m")
+        table = {
+            str(m or "causal"): [dict(zip(fields, row, strict=True)) for row in rows] for m, rows in results.items()
+        }
+        args.json.write_text(json.dumps(table, indent=1, allow_nan=True))
     if not args.no_emulator:
         for path, dur, seed in EMULATED:
             pct, dz, nees = emulated_row(path, dur, seed, args.axis_errors)

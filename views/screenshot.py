@@ -38,7 +38,13 @@ def _free_port() -> int:
 
 
 def screenshot(
-    rrd: Path, png: Path, *, end_s: float | None = None, size: tuple[int, int] = (1600, 900), timeout_s: float = 90.0
+    rrd: Path,
+    png: Path,
+    *,
+    end_s: float | None = None,
+    size: tuple[int, int] = (1600, 900),
+    timeout_s: float = 90.0,
+    settle_s: float = SETTLE_S,
 ) -> None:
     """Render ``rrd`` in a headless viewer and save it to ``png``.
 
@@ -55,6 +61,9 @@ def screenshot(
         window width and height, pixels.
     timeout_s
         how long the viewer may take to start and load, s.
+    settle_s
+        how long the views get after the data has loaded, s (the viewer's start-up notices fade
+        after about 10 s).
 
     Raises
     ------
@@ -91,7 +100,7 @@ def screenshot(
             if time.monotonic() > deadline:
                 raise ScreenshotError(f"the viewer did not load {rrd} up to {end_s:g} s within {timeout_s:.0f} s")
             time.sleep(0.3)
-        time.sleep(SETTLE_S)
+        time.sleep(settle_s)
         client.save_screenshot(str(png))
     finally:
         viewer.terminate()

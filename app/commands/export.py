@@ -63,7 +63,11 @@ def navigate_recording(
     FootnavError
         the recording never stands still, so it cannot be aligned.
     """
-    config = NavConfig(profile=get_profile(profile or rec.profile), stance_levels=stance_levels)
+    try:
+        unit = get_profile(profile or rec.profile)
+    except KeyError as exc:  # a recording is navigated with a built-in profile
+        raise FootnavError(f"{rec.name}: {exc.args[0]}") from None
+    config = NavConfig(profile=unit, stance_levels=stance_levels)
     sat = reconstruct_saturated_rates(rec.t_s, rec.gyr_b_radps)
     if smooth == "whole":
         from footnav.pipeline.smoothing.rts import smooth_recording
