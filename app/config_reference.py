@@ -62,10 +62,11 @@ def attribute_docs(cls: type) -> dict[str, str]:
         for name in names:
             docs[name] = " ".join(text).strip()
 
-    for line in lines[start:]:
+    body = lines[start:]
+    for i, line in enumerate(body):
         if line and not line.startswith(" "):
             match = _ENTRY.match(line)
-            if match is None:
+            if match is None or (i + 1 < len(body) and body[i + 1].startswith("---")):
                 break  # the next section
             flush()
             names, text = [n.strip() for n in match["names"].split(",")], []

@@ -55,7 +55,9 @@ def bar_chart(title: str, groups: list[str], series: dict[str, list[float | None
                 continue
             y = y0 + s * bar_h
             w = width * value / vmax
-            out.append(f'<rect x="{left}" y="{y}" width="{w:.1f}" height="{bar_h - 1}" fill="{COLOURS[s]}"/>')
+            out.append(
+                f'<rect class="bar" x="{left}" y="{y}" width="{w:.1f}" height="{bar_h - 1}" fill="{COLOURS[s]}"/>'
+            )
             out.append(f'<text x="{left + w + 3:.1f}" y="{y + bar_h - 1}" font-size="9">{value:.3f}</text>')
     for s, name in enumerate(names):
         x = left + s * 150 - 160
@@ -95,7 +97,9 @@ def main(argv: list[str] | None = None) -> int:
     peers = sorted({p for v in PEER_LOOPS_3D_M.values() for p in v})
     loop_series: dict[str, list[float | None]] = {"footnav, causal": [causal[n]["loop_3d_m"] for n in loops]}
     loop_series |= {p: [PEER_LOOPS_3D_M[n].get(p) for n in loops] for p in peers}
-    svg = bar_chart("Closed loops: end-to-start distance, 3D (lower is better)", loops, loop_series, "m")
+    names = {"short_walk": "x-io loop, 24 m", "data_inert": "OpenShoe loop, 85-90 m"}
+    labels = [names.get(n, n) for n in loops]
+    svg = bar_chart("Closed loops: end-to-start distance, 3D (lower is better)", labels, loop_series, "m")
     (IMAGES / "accuracy-loops.svg").write_text(svg)
     print(f"wrote {IMAGES / 'accuracy-pyshoe.svg'} and {IMAGES / 'accuracy-loops.svg'}")
     return 0
