@@ -12,5 +12,5 @@ AXIS_ERRORS = ("gyro-bias-calibrated", "none")
 """Emulated axis errors: the keys of :data:`footnav.device.emulator.sensors.imu_errors.AXIS_ERRORS`."""
 PROFILES = ("adis16367", "generic", "gx3", "mpu6500x4")
 """Built-in unit profiles: the keys of :data:`footnav.pipeline.navigation.profiles.PROFILES`."""
-RECORDING_FORMATS = ("csv", "openshoe", "pyshoe", "xio")
+RECORDING_FORMATS = ("csv", "mimu-log", "openshoe", "pyshoe", "xio")
 """Recording formats: the keys of :data:`footnav.device.files.recordings.LOADERS`."""

@@ -9,7 +9,7 @@ The file (TOML, read with :mod:`tomllib`)::
     capture_flush_s = 1.0       # captured bytes reach the OS at most this late (what a crash can lose)
     [unit]
     profile = "mpu6500x4"       # a built-in profile or one of [profiles.NAME]
-    rate_divider = 0            # output every 2**K samples of the 1 kHz base rate
+    rate_divider = 0            # output every 2**K samples of the unit's base rate (K = 0..14)
     [filter]                    # footnav.pipeline.navigation.navigator.NavConfig (SI units, radians)
     align_s = 0.5
     [detector]                  # the dataclass of NavConfig.detector (footnav.pipeline.stance.detectors)

@@ -26,7 +26,8 @@ SESSION_KEYS: dict[str, str] = {
     "session.capture": "capture every byte of every live session and demo (replayable later)",
     "session.capture_flush_s": "captured bytes reach the operating system at most this late (what a crash can lose), s",
     "unit.profile": "the unit's noise profile: a built-in one or one of [profiles.NAME]",
-    "unit.rate_divider": "output every 2**K samples of the unit's 1 kHz base rate",
+    "unit.rate_divider": "output every 2**K samples of the unit's base rate, K = 0..14 (footnav navigates at the "
+    "rate the unit's clock gives)",
     "calibration.dir": "folder of calibration files (empty: $FOOTNAV_CALIBRATION_DIR, else "
     "$XDG_CONFIG_HOME/footnav/calibration, else ~/.config/footnav/calibration)",
     "calibration.apply": "apply a unit's calibration file when it connects or its capture is replayed",

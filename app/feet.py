@@ -199,6 +199,23 @@ def link_reporter(
     return report
 
 
+def rate_reporter(run: FootRun, views: SessionViews | None, *, two_feet: bool) -> Callable[[float, float], None]:
+    """Report that a foot's unit streams at another rate than was asked for: a notice on the terminal
+    and a warning in the recording."""
+    prefix = f"{run.foot}: " if two_feet else ""
+
+    def report(clock_hz: float, asked_hz: float) -> None:
+        text = (
+            f"{prefix}the unit's clock gives {clock_hz:g} samples/s where {asked_hz:g} were asked for; "
+            f"navigating at {clock_hz:g} Hz"
+        )
+        notice(text)
+        if views is not None:
+            views.log_event(text, level="WARN")
+
+    return report
+
+
 def calibration_lookup(
     config: Config,
     foot: str,

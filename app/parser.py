@@ -199,9 +199,10 @@ def _add_live_command(sub: Commands) -> None:
         "--rate-divider",
         type=int,
         default=None,
-        choices=range(7),
+        choices=range(15),
         metavar="K",
-        help="output every 2**K samples of the 1 kHz base rate (default 0: 1 kHz on serial, 2: 250 Hz on BLE)",
+        help="output every 2**K samples of the unit's base rate, K = 0..14 (default 0 on serial, 2 on BLE: "
+        "1 kHz and 250 Hz on a 1 kHz unit); footnav navigates at the rate the unit's clock gives",
     )
     _add_output_args(live, capture=True)
 
@@ -319,7 +320,7 @@ def _add_experiment_command(sub: Commands) -> None:
 def _add_config_command(sub: Commands) -> None:
     config = sub.add_parser("config", help="show the effective configuration and where each value came from")
     _add_config_args(config)
-    config.add_argument("--rate-divider", type=int, default=None, choices=range(7), metavar="K")
+    config.add_argument("--rate-divider", type=int, default=None, choices=range(15), metavar="K")
     config.add_argument("--sessions", type=Path, metavar="DIR", help="capture folder")
     config.add_argument("--no-capture", action="store_true", help="as the live option")
 
@@ -331,7 +332,8 @@ def _add_recording_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--columns",
         metavar="SPEC",
-        help="for a generic CSV: time=COL[:s|ms|us|ns],acc=X;Y;Z[:m/s2|g|mg],gyr=X;Y;Z[:rad/s|deg/s],profile=NAME",
+        help="for a generic CSV: time=COL[:s|ms|us|ns],acc=X;Y;Z[:m/s2|g|mg],gyr=X;Y;Z[:rad/s|mrad/s|deg/s],"
+        "profile=NAME",
     )
     parser.add_argument("--profile", choices=PROFILES, help="unit profile (default: the format's sensor)")
     _add_smooth_arg(parser)

@@ -15,6 +15,7 @@ import asyncio
 import contextlib
 import dataclasses
 import logging
+import math
 from collections.abc import AsyncGenerator, AsyncIterator, Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal, cast
@@ -27,6 +28,7 @@ from footnav.device.links.base import CaptureTap
 from footnav.device.links.reconnecting import LinkEvent, ReconnectingLink
 from footnav.device.modes import Mode, RawImuMode
 from footnav.device.protocol.extensions import BaroBatch, TofBatch
+from footnav.device.protocol.imu import clock_rate_hz
 from footnav.device.protocol.raw_imu import RawImuBatch
 from footnav.device.unit import LinkStats, OpenShoeUnit
 from footnav.pipeline.aiding.baro import PressureBatch
@@ -35,6 +37,7 @@ from footnav.pipeline.calibration.model import CalibrationError, ImuCalibration
 from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.runner import BatchNavigator, NavSink, SourceItem, run_pipeline
 from footnav.pipeline.samples import ImuBatch
+from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     from footnav.app.calibration_store import StoredCalibration
@@ -61,6 +64,8 @@ class SerialSessionResult:
     """Samples handed to the pipeline (a replay of the capture stops after as many)."""
     link_health: links.LinkHealth | None = None
     """Reconnects, stalls and gaps of a live unit's link (None for a replay)."""
+    clock_rate_hz: float | None = None
+    """The sample rate by the unit's clock (``footnav.device.protocol.imu.clock_rate_hz``), Hz."""
 
 
 @dataclass(frozen=True)
@@ -359,6 +364,41 @@ async def _session_samples(
             yield batch
 
 
+async def _at_clock_rate(
+    samples: AsyncIterator[Any],
+    navigator: BatchNavigator[Any],
+    result: SerialSessionResult,
+    on_rate: Callable[[float, float], None] | None,
+) -> AsyncIterator[Any]:
+    """``samples`` unchanged, once the unit's clock has told the sample rate (``clock_rate_hz``):
+    until then they are held, and the navigator is retimed to that rate when it was built for
+    another (``on_rate(clock rate, the rate it was built for)`` is told). A stream that ends first
+    is navigated at the rate the navigator was built for."""
+    held: list[Any] = []
+    times: list[NDArray[np.float64]] = []
+    async for item in samples:
+        if result.clock_rate_hz is not None:
+            yield item
+            continue
+        held.append(item)
+        if isinstance(item, ImuBatch | RawImuBatch):
+            times.append(item.t_s)
+            rate = clock_rate_hz(np.concatenate(times))
+            if rate is None:
+                continue
+            result.clock_rate_hz = rate
+            if not math.isclose(rate, navigator.rate_hz, rel_tol=1e-9):
+                nominal = navigator.rate_hz
+                navigator.retime(rate)
+                if on_rate is not None:
+                    on_rate(rate, nominal)
+            for h in held:
+                yield h
+            held = []
+    for h in held:
+        yield h
+
+
 async def _corrected(samples: AsyncIterator[Any], calibration: ImuCalibration) -> AsyncIterator[Any]:
     """The calibration stage before the navigator: every IMU batch corrected (no temperature in the
     stream); other readings pass through."""
@@ -414,6 +454,7 @@ async def run_device_session(
     calibration: CalibrationLookup | None = None,
     mode: Mode | None = None,
     extensions: bool = False,
+    on_rate: Callable[[float, float], None] | None = None,
 ) -> SerialSessionResult:
     """Open the unit at ``address`` through a :class:`~footnav.device.links.reconnecting.ReconnectingLink`, start
     its IMU
@@ -434,7 +475,7 @@ async def run_device_session(
     ``mode``: the output mode to start (None: the calibrated-IMU stream at ``rate_divider_log2``);
     ``RawImuMode`` streams ``RawImuBatch`` es (e.g. the dual-IMU board) to a matching navigator;
     ``extensions``: also switch on the unit's ToF and barometer states (footnav's extension states
-    0xE1/0xE2); their readings go to the navigator.
+    0xE1/0xE2); their readings go to the navigator; ``on_rate``: see :func:`run_unit_session`.
 
     Raises
     ------
@@ -459,6 +500,7 @@ async def run_device_session(
         calibration=calibration,
         mode=mode,
         extensions=extensions,
+        on_rate=on_rate,
     )
 
 
@@ -483,6 +525,7 @@ async def run_unit_session(
     extensions: bool = False,
     use_ranges: bool = True,
     join_samples: int = 0,
+    on_rate: Callable[[float, float], None] | None = None,
 ) -> SerialSessionResult:
     """Navigate an open unit's stream (see :func:`run_device_session`); ``start=False`` for a replay,
     where the captured bytes already hold the start and no stop is sent; ``idle_notice_s=None`` never
@@ -491,7 +534,9 @@ async def run_unit_session(
     capture holds that exchange); ``mode``: the output mode (see :func:`run_device_session`);
     ``extensions``: switch the ToF and barometer states on after the start; ``use_ranges=False``
     leaves the ToF readings out of the navigation; ``join_samples``: IMU batches joined to this
-    many samples (a replay at full speed: ``_imu_and_readings``). Closes the unit."""
+    many samples (a replay at full speed: ``_imu_and_readings``); the navigator runs at the rate
+    the unit's clock gives (``_at_clock_rate``; ``on_rate(clock rate, rate asked for)`` when they
+    differ). Closes the unit."""
     result = result if result is not None else SerialSessionResult()
     name = unit.link.name
 
@@ -536,6 +581,7 @@ async def run_unit_session(
             raw=isinstance(mode, RawImuMode),
             join_samples=join_samples,
         )
+        samples = _at_clock_rate(samples, navigator, result, on_rate)
         if stored is not None and mode is None:
             samples = _corrected(samples, stored.calibration)
         await run_pipeline(samples, navigator, [*sinks, keep_last])

@@ -294,7 +294,7 @@ class OpenShoeUnit:
         DeviceError
             no ACK within ``timeout_s``, or the link failed.
         ValueError
-            ``rate_divider_log2`` outside 0..6.
+            ``rate_divider_log2`` outside 0..14.
         """
         p.imu_mode_byte(rate_divider_log2)  # validate before anything is sent
         mode = NormalImuMode(rate_divider_log2, bias_estimation=with_bias_estimation)

@@ -35,8 +35,15 @@ class BatchNavigator(Protocol[BatchT_contra]):
     """What the runner drives: ``footnav.pipeline.navigation.navigator.Navigator`` (``ImuBatch``) or
     ``footnav.pipeline.dual_imu.navigator.DualNavigator`` (two-IMU batches)."""
 
+    rate_hz: float
+    """The sample rate it navigates at, Hz."""
+
     def process(self, batch: BatchT_contra) -> NavBatch | None:
         """Estimates for the batch's samples (None while there are none yet)."""
+        ...
+
+    def retime(self, rate_hz: float) -> None:
+        """Navigate at ``rate_hz`` (the unit's clock has told it), before the first sample."""
         ...
 
 

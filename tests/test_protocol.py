@@ -64,9 +64,16 @@ def test_mode_byte() -> None:
     assert [protocol.imu_mode_byte(k) for k in range(7)] == [1, 2, 3, 4, 5, 6, 7]
     assert protocol.imu_mode_byte(1, lossless=True) == 0x12
     assert [protocol.rate_divider_log2_from_mode(m) for m in (0x00, 0x01, 0x14, 0x17)] == [None, 0, 3, 6]
-    for bad in (-1, 7):
+    # the rate field is 4 bits (d up to 15, as GT Silicon's logging tool sends it), 3 for the raw 0x28
+    assert [protocol.imu_mode_byte(k) for k in (7, 14)] == [8, 15]
+    assert [protocol.rate_divider_log2_from_mode(m) for m in (0x08, 0x1F)] == [7, 14]
+    assert protocol.rate_divider_log2_from_mode(0x48, raw=True) is None  # 0x28: bit 3 is the magnetometer
+    assert protocol.rate_divider_log2_from_mode(0x4C, raw=True) == 3
+    for bad in (-1, 15):
         with pytest.raises(ValueError, match="rate_divider_log2"):
             protocol.imu_mode_byte(bad)
+    with pytest.raises(ValueError, match=r"rate_divider_log2 must be in 0\.\.6"):
+        protocol.imu_mode_byte(7, flags=protocol.MODE_INERTIAL)
 
 
 def test_command_frame_checks_table() -> None:

@@ -39,6 +39,7 @@ from footnav.app.feet import (
     new_session_id,
     notice,
     open_capture,
+    rate_reporter,
     run_feet,
     unit_header,
 )
@@ -327,6 +328,7 @@ def run_demo(opts: DemoOptions) -> int:
             calibration=None if opts.dual_imu else calibration_lookup(cfg, run.foot, capture, views, two_feet=two),
             mode=RawImuMode(imu_mask=DUAL_IMU_MASK) if opts.dual_imu else None,
             extensions=opts.tof and not opts.dual_imu,
+            on_rate=rate_reporter(run, views, two_feet=two),
         )
 
     interrupted = False

@@ -17,7 +17,7 @@ from footnav.app.status import input_handling
 from footnav.device.files.capture import MCAP_MAGIC
 from footnav.device.files.recordings import CsvMapping, Recording, load_recording
 from footnav.pipeline.aiding.tof_types import TofConfig
-from footnav.pipeline.errors import FootnavError
+from footnav.pipeline.errors import FootnavError, InputFormatError
 from footnav.pipeline.gait.steps import segment_steps
 from footnav.pipeline.gait.tof_clearance import swing_clearance
 from footnav.pipeline.nav_types import NavBatch
@@ -224,7 +224,7 @@ def run_export(
                 "(the smoothers do not take the ToF channel); drop it for the live estimates"
             )
         return export_capture(source, out, steps_out)
-    rec = load_recording(source, fmt, CsvMapping.parse(columns) if columns else None)
+    rec = load_other_recording(source, fmt, columns)
     nav, stats = navigate_recording(rec, profile, smooth, stance_levels)
     write_track_csv(nav, out)
     steps = "" if steps_out is None else f", {write_steps_csv(nav, steps_out, with_covariance=smooth is None)}"
@@ -238,6 +238,23 @@ def run_export(
         f"wrote {len(nav)} rows to {out}{steps} ({rec.format} recording, profile {profile or rec.profile}{skipped})"
         f"{handled}"
     )
+
+
+def load_other_recording(path: Path, fmt: str | None, columns: str | None) -> Recording:
+    """A recording from another tool (``--format``, ``--columns`` as the commands take them).
+
+    Raises
+    ------
+    InputFormatError
+        not a recording footnav reads; a file of no known kind is told footnav's captures too
+        (``export`` and ``replay`` take them).
+    """
+    try:
+        return load_recording(path, fmt, CsvMapping.parse(columns) if columns else None)
+    except InputFormatError as exc:
+        if "unknown recording format" not in str(exc):
+            raise
+        raise InputFormatError(f"{exc}; or a footnav capture (.mcap)") from None
 
 
 def _is_capture(path: Path) -> bool:

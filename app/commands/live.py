@@ -37,6 +37,7 @@ from footnav.app.feet import (
     new_session_id,
     notice,
     open_capture,
+    rate_reporter,
     run_feet,
     unit_header,
 )
@@ -208,6 +209,7 @@ async def live_session(opts: LiveOptions) -> int:
             calibration=calibration_lookup(cfg, run.foot, capture, views, two_feet=two_feet) if dual is None else None,
             extensions=opts.tof,
             mode=raw if dual is not None else None,
+            on_rate=rate_reporter(run, views, two_feet=two_feet),
         )
 
     if views is not None:

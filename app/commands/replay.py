@@ -22,7 +22,7 @@ from pathlib import Path
 
 from footnav.app.calibration_store import StoredCalibration, calibration_dir, load_calibration
 from footnav.app.config import Config, apply_capture_settings
-from footnav.app.feet import FootRun, dual_view_sink, foot_run, foot_sinks, notice
+from footnav.app.feet import FootRun, dual_view_sink, foot_run, foot_sinks, notice, rate_reporter
 from footnav.app.session import CalibrationLookup, run_unit_session
 from footnav.app.status import Progress, StatusLine, input_handling
 from footnav.device.files.capture import (
@@ -266,6 +266,7 @@ def run_replay(opts: ReplayOptions) -> int:
             use_ranges=opts.tof,
             join_samples=FULL_SPEED_JOIN_SAMPLES if math.isinf(opts.speed) else 0,
             mode=RawImuMode(imu_mask=DUAL_IMU_MASK, rate_divider_log2=rate_divider) if run.foot in lever_of else None,
+            on_rate=rate_reporter(run, views, two_feet=len(feet) > 1),
         )
 
     from footnav.app.feet import run_feet

@@ -16,11 +16,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from footnav.app.commands.export import navigate_recording
+from footnav.app.commands.export import load_other_recording, navigate_recording
 from footnav.app.feet import notice
 from footnav.app.status import input_handling
-from footnav.device.files.recordings import CsvMapping, Recording, load_recording
-from footnav.pipeline.errors import InputFormatError
+from footnav.device.files.recordings import Recording
 from footnav.pipeline.gait.events import GaitEventTracker
 from footnav.pipeline.metrics import ate, path_length_m
 from footnav.pipeline.nav_types import NavBatch
@@ -79,12 +78,7 @@ def run_recording_replay(opts: RecordingReplayOptions) -> int:
     FootnavError
         the recording never stands still, so it cannot be aligned.
     """
-    try:
-        rec = load_recording(opts.path, opts.fmt, CsvMapping.parse(opts.columns) if opts.columns else None)
-    except InputFormatError as exc:
-        if "unknown recording format" not in str(exc):
-            raise
-        raise InputFormatError(f"{exc}; or a footnav capture (.mcap)") from None
+    rec = load_other_recording(opts.path, opts.fmt, opts.columns)
     how = {None: "causal filter", "whole": "RTS-smoothed", "step": "smoothed step by step"}[opts.smooth]
     print(
         f"replaying {opts.path} ({rec.format} recording, {len(rec)} samples at {rec.rate_hz:.0f} Hz, "

@@ -537,7 +537,7 @@ class ShoeFirmware:
     def _periodic(
         self, key: str, mode: int, encode: Callable[[NDArray[np.int64]], NDArray[np.uint8]], now: float
     ) -> None:
-        log2 = p.rate_divider_log2_from_mode(mode)
+        log2 = p.rate_divider_log2_from_mode(mode, raw=key == "raw")
         if log2 is None:
             self._outputs.pop(key, None)
             return

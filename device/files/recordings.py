@@ -1,4 +1,5 @@
-"""Loaders for recordings made by other tools: PyShoe ``.mat``, x-io CSV, OpenShoe text, generic CSV.
+"""Loaders for recordings made by other tools: PyShoe ``.mat``, x-io CSV, OpenShoe text, generic CSV,
+raw logs of an OpenShoe/MIMU unit's stream (``footnav.device.files.vendor_log``).
 
 Each loader converts to SI units once, here, and returns a :class:`Recording`; nothing downstream
 knows which tool wrote the file. Ground truth, where a format carries it, is converted to footnav's
@@ -15,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from footnav.device.files import vendor_log
 from footnav.pipeline.errors import InputFormatError
 from numpy.typing import NDArray
 
@@ -289,7 +291,15 @@ def load_generic_csv(path: Path, mapping: CsvMapping | None = None) -> Recording
     wanted = [m.time, *m.acc, *m.gyr]
     missing = [c for c in wanted if c not in header]
     if missing:
-        raise InputFormatError(f"{path}: columns {', '.join(missing)} not found; the header has {', '.join(header)}")
+        if not header:
+            raise InputFormatError(f"{path} is empty; expected a CSV with a header row naming its columns")
+        noun = "column" if len(missing) == 1 else "columns"
+        if all(_is_number(h) for h in header):
+            raise InputFormatError(
+                f"{path}: the first row is numbers, not a header; add a header row naming the columns "
+                f"(--columns names which is which)"
+            )
+        raise InputFormatError(f"{path}: {noun} {', '.join(missing)} not found; the header has {', '.join(header)}")
     data = _read_numeric_csv(path, skip=1, ncols=len(header))[:, [header.index(c) for c in wanted]]
     t = data[:, 0] * TIME_UNITS[m.time_unit]
     return Recording(
@@ -302,6 +312,14 @@ def load_generic_csv(path: Path, mapping: CsvMapping | None = None) -> Recording
         profile=m.profile,
         closed_loop=m.closed_loop,
     )
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _csv_header(path: Path) -> list[str]:
@@ -325,11 +343,28 @@ def _read_numeric_csv(path: Path, skip: int, ncols: int) -> F64:
     return out
 
 
+def load_mimu_log_recording(path: Path) -> Recording:
+    """A raw binary log of an OpenShoe/MIMU unit's stream (``footnav.device.files.vendor_log``), at the
+    rate its clock gives, with the MPU-6500 boards' profile."""
+    t_s, acc, gyr, rate_hz, notes = vendor_log.load_mimu_log(path)
+    return Recording(
+        name=path.stem,
+        format=vendor_log.FORMAT,
+        t_s=t_s,
+        acc_b_mps2=acc,
+        gyr_b_radps=gyr,
+        rate_hz=rate_hz,
+        profile="mpu6500x4",
+        notes=notes,
+    )
+
+
 LOADERS: dict[str, Callable[[Path], Recording]] = {
     "pyshoe": load_pyshoe_mat,
     "xio": load_xio_csv,
     "openshoe": load_openshoe_txt,
     "csv": load_generic_csv,
+    vendor_log.FORMAT: load_mimu_log_recording,
 }
 
 
@@ -355,9 +390,12 @@ def detect_format(path: Path) -> str:
         return "xio"
     if path.suffix.lower() == ".csv":
         return "csv"
+    if vendor_log.looks_like_log(head):
+        return vendor_log.FORMAT
     raise InputFormatError(
         f"{path}: unknown recording format; expected a PyShoe .mat, an x-io CSV, an OpenShoe "
-        "data_inert.txt, or a CSV with a header row (give the columns with --columns)"
+        "data_inert.txt, a CSV with a header row (give the columns with --columns), or a raw log of an "
+        "OpenShoe/MIMU unit's stream"
     )
 
 

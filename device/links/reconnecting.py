@@ -421,7 +421,10 @@ class ReconnectingLink:
                 for key in [k for k in self._desired if k[0] in _STOPS]:
                     del self._desired[key]
                 key = (cid, cmd.payload[0] if cid == protocol.CMD_OUTPUT_STATE else 0)
-                off = cid in _CONTINUOUS_STARTS and protocol.rate_divider_log2_from_mode(cmd.payload[-1]) is None
+                raw = cid == protocol.CMD_OUTPUT_IMU_RD
+                off = (
+                    cid in _CONTINUOUS_STARTS and protocol.rate_divider_log2_from_mode(cmd.payload[-1], raw=raw) is None
+                )
                 if off:
                     self._desired.pop(key, None)
                 else:

@@ -124,7 +124,10 @@ COMMAND_PAYLOAD_LENGTHS: Final[dict[int, int]] = {
 """Payload length per command ID (2015 set). 0x10/0x11 depend on build constants and are left out."""
 
 # Mode byte (0x20, 0x21, 0x28, 0x40, 0x41): response_util.h.
-MODE_RATE_MASK: Final = 0x07
+MODE_RATE_MASK: Final = 0x0F
+"""The rate field d of 0x20, 0x21, 0x40 and 0x41: 4 bits (GT Silicon's logging tool sends d up to 15)."""
+RAW_MODE_RATE_MASK: Final = 0x07
+"""The rate field of 0x28: 3 bits, for its bit 3 is :data:`MODE_MAGNETOMETER`."""
 MODE_MAGNETOMETER: Final = 0x08
 """0x28 only: also send each IMU's magnetometer (states 0x90+i)."""
 MODE_LOSSLESS: Final = 0x10
@@ -135,8 +138,10 @@ MODE_INERTIAL: Final = 0x40
 """0x28 only: the inertial registers (states 0x40+i); GT's raw loggers always set it."""
 MODE_TEMPERATURE: Final = 0x80
 """0x28 only: also send each IMU's temperature (states 0x60+i)."""
-MAX_RATE_DIVIDER_LOG2: Final = 6
-"""Output every 2**k samples, k = 0..6: 1000 .. 15.625 Hz at the 1 kHz base rate."""
+MAX_RATE_DIVIDER_LOG2: Final = 14
+"""Output every 2**k samples, k = 0..14 (d = 1..15): 1000 .. 0.061 Hz at a 1 kHz base rate."""
+MAX_RAW_RATE_DIVIDER_LOG2: Final = 6
+"""0x28: k = 0..6 (d = 1..7)."""
 
 COMMAND_RX_TIMEOUT_S: Final = 200_000_000 / 64e6
 """An incomplete command is discarded after COM_TIMEOUT_LIMIT cycles at 64 MHz (≈3.1 s)."""
@@ -192,26 +197,30 @@ def stepwise_dead_reckoning_command() -> bytes:
 def imu_mode_byte(rate_divider_log2: int | None, *, lossless: bool = False, pull: bool = False, flags: int = 0) -> int:
     """Return the mode byte for output every ``2**rate_divider_log2`` samples (None: output off).
 
-    Bits 0–2 carry d = rate_divider_log2 + 1 (d = 0 means off); bit 4 (0x10) selects lossless mode,
-    bit 5 (0x20) pull (send once); ``flags`` may add the 0x28-only bits :data:`MODE_MAGNETOMETER`,
-    :data:`MODE_INERTIAL` and :data:`MODE_TEMPERATURE`.
+    The rate field carries d = rate_divider_log2 + 1 (d = 0 means off): bits 0–3 (d up to 15), or
+    bits 0–2 for the raw output 0x28, which ``flags`` marks by holding its bits
+    :data:`MODE_MAGNETOMETER`, :data:`MODE_INERTIAL` and :data:`MODE_TEMPERATURE`. Bit 4 (0x10)
+    selects lossless mode, bit 5 (0x20) pull (send once).
 
     Raises
     ------
     ValueError
-        ``rate_divider_log2`` is outside 0..6, or ``flags`` has bits other than 0x08/0x40/0x80.
+        ``rate_divider_log2`` is outside 0..14 (0..6 for 0x28), or ``flags`` has bits other than
+        0x08/0x40/0x80.
     """
-    if rate_divider_log2 is not None and not 0 <= rate_divider_log2 <= MAX_RATE_DIVIDER_LOG2:
-        raise ValueError(f"rate_divider_log2 must be in 0..{MAX_RATE_DIVIDER_LOG2}, got {rate_divider_log2}")
     if flags & ~(MODE_MAGNETOMETER | MODE_INERTIAL | MODE_TEMPERATURE):
         raise ValueError(f"flags may only hold 0x08, 0x40 and 0x80, got 0x{flags:02X}")
+    top = MAX_RAW_RATE_DIVIDER_LOG2 if flags else MAX_RATE_DIVIDER_LOG2
+    if rate_divider_log2 is not None and not 0 <= rate_divider_log2 <= top:
+        raise ValueError(f"rate_divider_log2 must be in 0..{top}, got {rate_divider_log2}")
     d = 0 if rate_divider_log2 is None else rate_divider_log2 + 1
     return d | (MODE_LOSSLESS if lossless else 0) | (MODE_PULL if pull else 0) | flags
 
 
-def rate_divider_log2_from_mode(mode: int) -> int | None:
-    """Inverse of :func:`imu_mode_byte` for the rate bits: None when the mode turns output off."""
-    d = mode & MODE_RATE_MASK
+def rate_divider_log2_from_mode(mode: int, *, raw: bool = False) -> int | None:
+    """Inverse of :func:`imu_mode_byte` for the rate field (3 bits with ``raw``, the 0x28 output):
+    None when the mode turns output off."""
+    d = mode & (RAW_MODE_RATE_MASK if raw else MODE_RATE_MASK)
     return None if d == 0 else d - 1
 
 

@@ -4,7 +4,7 @@ For firmware authors: these fit the OpenShoe framing unchanged (``AA pkt_hi pkt_
 protocol-openshoe.md 4.1), share the interface's package counter and lossless queue, and are switched
 with the existing OUTPUT_STATE command, so a 2015-firmware parser needs no new command ID::
 
-    20 E1 mode chk     ToF ranges on (mode & 0x07 != 0) / off (mode & 0x07 == 0); mode 0x10 = lossless
+    20 E1 mode chk     ToF ranges on (mode & 0x0F != 0) / off (mode & 0x0F == 0); mode 0x10 = lossless
     20 E2 mode chk     barometer on / off
 
 Both are **event-driven**: one packet per completed measurement, sent on its own (never concatenated

@@ -106,8 +106,6 @@ class DualNavigator:
 
     def __init__(self, config: DualNavConfig, rate_hz: float) -> None:
         self.config = config
-        self.rate_hz = rate_hz
-        self.detector = StreamingDetector(config.detector, rate_hz)
         self.stats = NavStats()
         self.filter: DualEskfStream | None = None
         self.last_track: DualEskfTrack | None = None
@@ -115,7 +113,26 @@ class DualNavigator:
         biases, constraint residuals), for sinks that show more than the NavBatch holds."""
         self._pending: list[tuple[NDArray[Any], ...]] = []  # (t, acc, gyr, host, stat, threshold, still)
         self._t_last = math.nan
-        self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels, level_states=0), rate_hz)
+        self._init_rate(rate_hz)
+
+    def _init_rate(self, rate_hz: float) -> None:
+        """The parts sized by the sample rate: the detector and the stance levels."""
+        self.rate_hz = rate_hz
+        self.detector = StreamingDetector(self.config.detector, rate_hz)
+        self.levels = StanceLevels(StanceLevelParams(use=self.config.stance_levels, level_states=0), rate_hz)
+
+    def retime(self, rate_hz: float) -> None:
+        """Navigate at ``rate_hz`` instead of the rate given at construction; only before the first
+        sample (as ``Navigator.retime``).
+
+        Raises
+        ------
+        RuntimeError
+            samples have already been given.
+        """
+        if self.stats.samples_in:
+            raise RuntimeError("the sample rate can only change before the first sample")
+        self._init_rate(rate_hz)
 
     @property
     def messages(self) -> tuple[str, ...]:

@@ -235,8 +235,26 @@ class Navigator:
 
     def __init__(self, config: NavConfig, rate_hz: float, tof: TofConfig | None = None) -> None:
         self.config = config
-        self.rate_hz = rate_hz
         self.tof = TofAiding(tof or TofConfig())
+        self.altimeter = PressureAltimeter()
+        self._altitude: list[PressureAltitude] = []
+        self._strides = StrideClearanceTracker()
+        self.stats = NavStats()
+        self._pending: list[tuple[ImuBatch, F64, F64, NDArray[np.bool_]]] = []
+        self._x: F64 | None = None
+        self._P = np.zeros((eskf.N_STATE, eskf.N_STATE))
+        self._t_last = math.nan
+        self._counters = np.zeros(eskf.N_CNT, dtype=np.int64)
+        self._filter_state = eskf.new_filter_state()
+        self._init_rate(rate_hz)
+        self.level_updates: list[tuple[int, float]] | None = None
+        """When a list: each stance height update, as (sample index since alignment, level height)."""
+        self._filter_inputs: tuple[F64, F64, F64, F64, NDArray[np.bool_], F64] | None = None
+        """The filter's inputs of the last batch: acc, gyr, clipped-rate variance, Δt, stance, T/γ."""
+
+    def _init_rate(self, rate_hz: float) -> None:
+        """The parts sized by the sample rate: detectors, stance levels, the filter's noise."""
+        self.rate_hz = rate_hz
         tof_cfg = self.tof.config
         self.height_detector = (
             None
@@ -245,23 +263,22 @@ class Navigator:
                 tof_cfg.detector, np.asarray(tof_cfg.lever_b_m), np.asarray(tof_cfg.dir_b), rate_hz
             )
         )
-        self.altimeter = PressureAltimeter()
-        self._altitude: list[PressureAltitude] = []
-        self._strides = StrideClearanceTracker()
-        self.detector = StreamingDetector(config.detector, rate_hz)
-        self.stats = NavStats()
-        self._pending: list[tuple[ImuBatch, F64, F64, NDArray[np.bool_]]] = []
-        self._x: F64 | None = None
-        self._P = np.zeros((eskf.N_STATE, eskf.N_STATE))
-        self._par = filter_parameters(config.profile, rate_hz, G0_MPS2, config.dt_max_s)  # until aligned
-        self._t_last = math.nan
-        self._counters = np.zeros(eskf.N_CNT, dtype=np.int64)
-        self._filter_state = eskf.new_filter_state()
-        self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels), rate_hz)
-        self.level_updates: list[tuple[int, float]] | None = None
-        """When a list: each stance height update, as (sample index since alignment, level height)."""
-        self._filter_inputs: tuple[F64, F64, F64, F64, NDArray[np.bool_], F64] | None = None
-        """The filter's inputs of the last batch: acc, gyr, clipped-rate variance, Δt, stance, T/γ."""
+        self.detector = StreamingDetector(self.config.detector, rate_hz)
+        self._par = filter_parameters(self.config.profile, rate_hz, G0_MPS2, self.config.dt_max_s)  # until aligned
+        self.levels = StanceLevels(StanceLevelParams(use=self.config.stance_levels), rate_hz)
+
+    def retime(self, rate_hz: float) -> None:
+        """Navigate at ``rate_hz`` instead of the rate given at construction (the unit's clock has
+        told the real one); only before the first sample or reading.
+
+        Raises
+        ------
+        RuntimeError
+            samples have already been given.
+        """
+        if self.stats.samples_in:
+            raise RuntimeError("the sample rate can only change before the first sample")
+        self._init_rate(rate_hz)
 
     @property
     def aligned(self) -> bool:

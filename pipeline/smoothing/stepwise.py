@@ -90,14 +90,12 @@ class StepSmoothingNavigator(Navigator):
         max_window_s: float = MAX_WINDOW_S,
         with_covariance: bool = False,
     ) -> None:
+        self._close_after_s, self._max_window_s = close_after_s, max_window_s
         super().__init__(config, rate_hz, tof=tof)
         self.with_covariance = with_covariance
         self.smoothing = True
         """False once ToF readings have arrived (class docstring)."""
-        self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels, level_states=0), rate_hz)
         self.level_updates = []
-        self.close_after = max(1, round(close_after_s * rate_hz))
-        self.max_window = max(self.close_after + 1, round(max_window_s * rate_hz))
         self._checkpoint: tuple[F64, F64, int, NDArray[np.int64]] | None = None  # x, P, level updates, filter state
         self._window_start = 0  # index of the open window's first sample (0: first after alignment)
         self._pieces: list[tuple[int, tuple[NDArray[np.generic], ...]]] = []  # (first index, inputs)
@@ -106,6 +104,12 @@ class StepSmoothingNavigator(Navigator):
         """Index of each window's last sample, in order (0: the first sample after alignment; one
         number per step)."""
         _load_kernels()
+
+    def _init_rate(self, rate_hz: float) -> None:
+        super()._init_rate(rate_hz)
+        self.levels = StanceLevels(StanceLevelParams(use=self.config.stance_levels, level_states=0), rate_hz)
+        self.close_after = max(1, round(self._close_after_s * rate_hz))
+        self.max_window = max(self.close_after + 1, round(self._max_window_s * rate_hz))
 
     def add_ranges(self, readings: RangeBatch) -> None:
         if len(readings) and self.smoothing:
