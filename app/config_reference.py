@@ -4,7 +4,7 @@ the code's own tables, so that the documentation cannot drift from it.
 Descriptions of the [filter], [detector], [tof] and [profiles.NAME] keys are the numpydoc
 ``Attributes`` entries of the dataclasses they map onto (``NavConfig``, ``DetectorParams``,
 ``TofConfig``, ``UnitProfile``); the [session], [unit] and [calibration] keys are described in
-:data:`SESSION_KEYS`. ``docs/hooks.py`` renders :func:`markdown_table` into the documentation.
+:data:`SESSION_KEYS`. ``docs/generate.py`` writes :func:`markdown_table` into the documentation.
 """
 
 from __future__ import annotations

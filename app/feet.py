@@ -23,8 +23,9 @@ import numpy as np
 from footnav.app import heap
 from footnav.app.calibration_store import StoredCalibration, any_calibrations, calibration_dir, load_calibration
 from footnav.app.config import Config
-from footnav.app.session import CalibrationLookup, LinkHealth, SerialSessionResult
+from footnav.app.session import CalibrationLookup, LinkHealth
 from footnav.app.status import StatusLine, input_handling
+from footnav.app.stream import SerialSessionResult
 from footnav.device.errors import DeviceError
 from footnav.device.files.capture import CaptureTap, CaptureWriter, UnitHeader
 from footnav.device.links.reconnecting import LinkEvent, LinkGap, ReconnectingLink
@@ -400,7 +401,7 @@ def foot_run(
         The second IMU's position on a dual-IMU board, body axes, m: the board's filter
         (:class:`~footnav.pipeline.dual_imu.navigator.DualNavigator`) instead of the single-IMU one.
     rate_divider_log2
-        The unit's rate divider, K in 1 kHz / 2**K.
+        The unit's rate divider K: every 2**K-th sample of its base rate.
     """
     navigator: Navigator | DualNavigator
     if dual_lever_b_m is not None:

@@ -261,7 +261,8 @@ def _add_replay_command(sub: Commands) -> None:
         "file",
         type=Path,
         metavar="FILE",
-        help="a capture written by footnav live/demo, or a PyShoe .mat, x-io CSV, OpenShoe log or CSV",
+        help="a capture written by footnav live/demo, or a PyShoe .mat, x-io CSV, OpenShoe log, CSV or a unit's "
+        "raw log",
     )
     replay.add_argument("--speed", type=_pace, default=math.inf, metavar="1x|Nx|max", help="replay pace (default max)")
     replay.add_argument("--start", type=_seconds, default=0.0, metavar="S", help="start S seconds into the capture")
@@ -289,7 +290,10 @@ def _add_replay_command(sub: Commands) -> None:
 def _add_export_command(sub: Commands) -> None:
     export = sub.add_parser("export", help="navigate a recording and write one CSV row per sample")
     export.add_argument(
-        "input", type=Path, metavar="INPUT", help="a PyShoe .mat, x-io CSV, OpenShoe log, CSV, or a footnav capture"
+        "input",
+        type=Path,
+        metavar="INPUT",
+        help="a PyShoe .mat, x-io CSV, OpenShoe log, CSV, a unit's raw log, or a footnav capture",
     )
     export.add_argument("-o", "--output", type=Path, required=True, metavar="TRACK.csv", help="where to write")
     export.add_argument(

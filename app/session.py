@@ -1,43 +1,33 @@
 """Session assembly: a unit (serial port, BLE, or capture replay) -> the pipeline -> sinks, clean shutdown.
 
-Live units are opened through :class:`footnav.device.links.reconnecting.ReconnectingLink`: an unplugged serial unit or a
-dropped BLE connection is reconnected with backoff and its stream resumed while the session, its
-capture and its outputs go on; each interruption is a :class:`footnav.device.links.reconnecting.LinkEvent` for the
-caller
-(``on_link_event``) and is counted in the link's :class:`footnav.device.links.reconnecting.LinkHealth`. A port that
-does not
-exist or is busy when the session starts is still an error at once (no retrying a typo).
+Live units are opened through :class:`footnav.device.links.reconnecting.ReconnectingLink`: an unplugged
+serial unit or a dropped BLE connection is reconnected with backoff and its stream resumed while the
+session, its capture and its outputs go on; each interruption is a
+:class:`footnav.device.links.reconnecting.LinkEvent` for the caller (``on_link_event``) and is counted in
+the link's :class:`footnav.device.links.reconnecting.LinkHealth`. A port that does not exist or is busy
+when the session starts is still an error at once (no retrying a typo). The samples' way from the unit
+to the pipeline is :mod:`footnav.app.stream`.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import dataclasses
 import logging
-import math
-from collections.abc import AsyncGenerator, AsyncIterator, Callable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal, cast
+from typing import TYPE_CHECKING, Any, Literal
 
-import numpy as np
 from footnav.app.status import FootStatus, StatusLine
+from footnav.app.stream import IDLE_NOTICE_S, SerialSessionResult, at_clock_rate, corrected, session_samples
 from footnav.device.errors import DeviceError
-from footnav.device.links import reconnecting as links
 from footnav.device.links.base import CaptureTap
 from footnav.device.links.reconnecting import LinkEvent, ReconnectingLink
 from footnav.device.modes import Mode, RawImuMode
-from footnav.device.protocol.extensions import BaroBatch, TofBatch
-from footnav.device.protocol.imu import clock_rate_hz
-from footnav.device.protocol.raw_imu import RawImuBatch
 from footnav.device.unit import LinkStats, OpenShoeUnit
-from footnav.pipeline.aiding.baro import PressureBatch
-from footnav.pipeline.aiding.tof_types import RangeBatch
-from footnav.pipeline.calibration.model import CalibrationError, ImuCalibration
+from footnav.pipeline.calibration.model import CalibrationError
 from footnav.pipeline.nav_types import NavBatch
-from footnav.pipeline.runner import BatchNavigator, NavSink, SourceItem, run_pipeline
-from footnav.pipeline.samples import ImuBatch
-from numpy.typing import NDArray
+from footnav.pipeline.runner import BatchNavigator, NavSink, run_pipeline
 
 if TYPE_CHECKING:
     from footnav.app.calibration_store import StoredCalibration
@@ -46,26 +36,8 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 LIVE_READ_INTERVAL_S = 0.010  # coalesce reads: about 10 packets a batch at 1 kHz (see OpenShoeUnit)
-IDLE_NOTICE_S = 1.0  # a unit that stops streaming is noticed within this long
 LINK_HEALTH_PERIOD_S = 0.5
 """Link health (rate, loss, reconnects) is logged every this much device time."""
-
-
-@dataclass
-class SerialSessionResult:
-    """What a session leaves behind for the summary."""
-
-    link: LinkStats | None = None
-    first_counter: int | None = None
-    last_nav: NavBatch | None = None
-    device_t0_s: float | None = None
-    unit_stopped_cleanly: bool = False
-    samples_received: int = 0
-    """Samples handed to the pipeline (a replay of the capture stops after as many)."""
-    link_health: links.LinkHealth | None = None
-    """Reconnects, stalls and gaps of a live unit's link (None for a replay)."""
-    clock_rate_hz: float | None = None
-    """The sample rate by the unit's clock (``footnav.device.protocol.imu.clock_rate_hz``), Hz."""
 
 
 @dataclass(frozen=True)
@@ -208,234 +180,6 @@ class LinkHealth:
         self._t_next = t_last + LINK_HEALTH_PERIOD_S
 
 
-async def _raw_batches(unit: OpenShoeUnit) -> AsyncGenerator[RawImuBatch, None]:
-    """Only the :class:`RawImuBatch` es of the unit's stream."""
-    async with contextlib.aclosing(unit.batches()) as stream:
-        async for batch in stream:
-            if isinstance(batch, RawImuBatch):
-                yield batch
-
-
-def _readings(batch: TofBatch | BaroBatch, t0_s: float, window: tuple[float, float] | None) -> SourceItem | None:
-    """A ToF or barometer batch as the pipeline's readings, on the session clock (None: none left)."""
-    t_s = batch.t_s - t0_s
-    keep = np.ones(t_s.shape, dtype=bool) if window is None else (t_s >= window[0]) & (t_s <= window[1])
-    if not keep.any():
-        return None
-    if isinstance(batch, TofBatch):
-        return RangeBatch(t_s[keep], batch.sensor[keep], batch.range_m[keep], batch.status[keep])
-    return PressureBatch(t_s[keep], batch.pressure_pa[keep])
-
-
-class _Window:
-    """A session's window ``(start, end)`` in session seconds (None: the whole session): samples before
-    it are decoded but not passed on, ``on_window()`` is called at the first one passed on."""
-
-    def __init__(self, bounds: tuple[float, float] | None, on_window: Callable[[], None] | None) -> None:
-        self.bounds = bounds
-        self.on_window = on_window
-        self.entered = bounds is None
-
-    def ended(self, t_first_s: float) -> bool:
-        """Whether a batch starting at ``t_first_s`` (session s) lies after the window's end."""
-        return self.bounds is not None and t_first_s > self.bounds[1]
-
-    def trim(self, batch: ImuBatch) -> ImuBatch | None:
-        """``batch`` (session time) trimmed to the window to the sample, whatever the batching (None:
-        none of it in the window)."""
-        if self.bounds is None:
-            return batch
-        start_s, end_s = self.bounds
-        if not self.entered:
-            if float(batch.t_s[-1]) < start_s:
-                return None
-            self.entered = True
-            if self.on_window is not None:
-                self.on_window()
-        keep = (batch.t_s >= start_s) & (batch.t_s <= end_s)
-        if keep.all():
-            return batch
-        return batch.select(keep) if keep.any() else None
-
-
-async def _arrivals(
-    batches: AsyncGenerator[Any, None],
-    idle_notice_s: float | None,
-    source_done: Callable[[], bool],
-    on_idle: Callable[[float], None],
-) -> AsyncGenerator[Any, None]:
-    """The stream's batches as they arrive. With ``idle_notice_s``, ``on_idle(idle_notice_s)`` each time
-    none came for that long, and the end once ``source_done()`` while idle; None (a replay): never idle,
-    and no task per batch."""
-    if idle_notice_s is None:
-        async for batch in batches:
-            yield batch
-        return
-    # The pending anext survives idle timeouts: cancelling it (asyncio.wait_for) would end the generator.
-    pending: asyncio.Future[Any] | None = None
-    try:
-        while True:
-            if pending is None:
-                pending = asyncio.ensure_future(anext(batches))
-            done, _ = await asyncio.wait({pending}, timeout=idle_notice_s)
-            if not done:
-                if source_done():
-                    return
-                on_idle(idle_notice_s)
-                continue
-            fut, pending = pending, None
-            try:
-                batch = fut.result()
-            except StopAsyncIteration:
-                return
-            yield batch
-    finally:
-        if pending is not None and not pending.done():
-            pending.cancel()
-            with contextlib.suppress(asyncio.CancelledError, StopAsyncIteration):
-                await pending
-
-
-def _on_session_clock(
-    batch: ImuBatch, result: SerialSessionResult, host_clock: Callable[[int], int] | None
-) -> ImuBatch:
-    """An IMU batch with its time rebased to the session's first sample (which the first batch sets),
-    and its host stamps mapped by ``host_clock`` (per read: a joined batch holds several)."""
-    if host_clock is not None:
-        stamps, read_of = np.unique(batch.host_ns, return_inverse=True)
-        mapped = np.array([host_clock(int(h)) for h in stamps], dtype=np.int64)
-        batch = dataclasses.replace(batch, host_ns=mapped[read_of])
-    if result.device_t0_s is None:
-        result.device_t0_s = float(batch.t_s[0])
-        result.first_counter = int(batch.counter[0])
-    return dataclasses.replace(batch, t_s=batch.t_s - result.device_t0_s)
-
-
-async def _session_samples(
-    unit: OpenShoeUnit,
-    result: SerialSessionResult,
-    expect_samples: int | None,
-    source_done: Callable[[], bool],
-    on_idle: Callable[[float], None],
-    host_clock: Callable[[int], int] | None = None,
-    idle_notice_s: float | None = IDLE_NOTICE_S,
-    window: tuple[float, float] | None = None,
-    on_window: Callable[[], None] | None = None,
-    use_ranges: bool = True,
-    raw: bool = False,
-    join_samples: int = 0,
-) -> AsyncIterator[Any]:
-    """The unit's IMU batches (and ToF and barometer readings, when the unit sends them; or, with
-    ``raw``, the ``RawImuBatch`` es of the multi-IMU output 0x28 of e.g. the dual-IMU board) with time
-    rebased to the session's first sample; ends after ``expect_samples`` IMU samples or when
-    ``source_done()`` and the link has gone quiet.
-
-    ``host_clock`` maps the driver's host stamp of a batch to another (a replay's captured time).
-    ``window = (start, end)`` in session seconds: samples outside it are decoded but not
-    passed on (``on_window()`` is called at the first one passed on), the stream ends after ``end``.
-    Readings before the first IMU sample (no session clock yet) are dropped; ToF readings are dropped
-    when not ``use_ranges``."""
-    span = _Window(window, on_window)
-    received = 0
-    batches = cast(AsyncGenerator[Any, None], _raw_batches(unit) if raw else _imu_and_readings(unit, join_samples))
-    arrivals = _arrivals(batches, idle_notice_s, source_done, on_idle)
-    async with contextlib.aclosing(batches), contextlib.aclosing(arrivals):
-        while expect_samples is None or received < expect_samples:
-            try:
-                batch = await anext(arrivals)
-            except StopAsyncIteration:
-                return
-            if isinstance(batch, TofBatch | BaroBatch):
-                if isinstance(batch, TofBatch) and not use_ranges:
-                    continue
-                if result.device_t0_s is not None and span.entered:
-                    item = _readings(batch, result.device_t0_s, window)
-                    if item is not None:
-                        yield item
-                continue
-            batch = _on_session_clock(batch, result, host_clock)
-            if span.ended(float(batch.t_s[0])):
-                return
-            batch = span.trim(batch)
-            if batch is None:
-                continue
-            received += len(batch)
-            result.samples_received = received
-            yield batch
-
-
-async def _at_clock_rate(
-    samples: AsyncIterator[Any],
-    navigator: BatchNavigator[Any],
-    result: SerialSessionResult,
-    on_rate: Callable[[float, float], None] | None,
-) -> AsyncIterator[Any]:
-    """``samples`` unchanged, once the unit's clock has told the sample rate (``clock_rate_hz``):
-    until then they are held, and the navigator is retimed to that rate when it was built for
-    another (``on_rate(clock rate, the rate it was built for)`` is told). A stream that ends first
-    is navigated at the rate the navigator was built for."""
-    held: list[Any] = []
-    times: list[NDArray[np.float64]] = []
-    async for item in samples:
-        if result.clock_rate_hz is not None:
-            yield item
-            continue
-        held.append(item)
-        if isinstance(item, ImuBatch | RawImuBatch):
-            times.append(item.t_s)
-            rate = clock_rate_hz(np.concatenate(times))
-            if rate is None:
-                continue
-            result.clock_rate_hz = rate
-            if not math.isclose(rate, navigator.rate_hz, rel_tol=1e-9):
-                nominal = navigator.rate_hz
-                navigator.retime(rate)
-                if on_rate is not None:
-                    on_rate(rate, nominal)
-            for h in held:
-                yield h
-            held = []
-    for h in held:
-        yield h
-
-
-async def _corrected(samples: AsyncIterator[Any], calibration: ImuCalibration) -> AsyncIterator[Any]:
-    """The calibration stage before the navigator: every IMU batch corrected (no temperature in the
-    stream); other readings pass through."""
-    async for item in samples:
-        yield calibration.correct(item) if isinstance(item, ImuBatch) else item
-
-
-async def _imu_and_readings(
-    unit: OpenShoeUnit, join_samples: int = 0
-) -> AsyncGenerator[ImuBatch | TofBatch | BaroBatch, None]:
-    """The IMU, ToF and barometer batches of :meth:`OpenShoeUnit.batches`, in arrival order.
-
-    ``join_samples > 0``: consecutive IMU batches are joined until they hold that many samples (or
-    another kind of batch, or the end, comes). For a replay at full speed, whose reads are all there
-    at once: the unit still frames and orders each captured read as it did live, and everything
-    after it pays its per-batch cost once per join instead of once per read."""
-    held: list[ImuBatch] = []
-    held_samples = 0
-    async with contextlib.aclosing(unit.batches()) as stream:
-        async for batch in stream:
-            if not isinstance(batch, ImuBatch | TofBatch | BaroBatch):
-                continue
-            if isinstance(batch, ImuBatch) and join_samples > 0:
-                held.append(batch)
-                held_samples += len(batch)
-                if held_samples >= join_samples:
-                    yield ImuBatch.concat(held)
-                    held, held_samples = [], 0
-                continue
-            if held:
-                yield ImuBatch.concat(held)
-                held, held_samples = [], 0
-            yield batch
-        if held:
-            yield ImuBatch.concat(held)
-
-
 async def run_device_session(
     address: UnitAddress,
     navigator: BatchNavigator[Any],
@@ -529,13 +273,13 @@ async def run_unit_session(
 ) -> SerialSessionResult:
     """Navigate an open unit's stream (see :func:`run_device_session`); ``start=False`` for a replay,
     where the captured bytes already hold the start and no stop is sent; ``idle_notice_s=None`` never
-    treats a pause as idle (replays); ``window``: see ``_session_samples``; ``calibration``: ask the
+    treats a pause as idle (replays); ``window``: see ``footnav.app.stream.session_samples``; ``calibration``: ask the
     unit its MCU id before the start and apply its calibration file (a replay passes one only when the
     capture holds that exchange); ``mode``: the output mode (see :func:`run_device_session`);
     ``extensions``: switch the ToF and barometer states on after the start; ``use_ranges=False``
     leaves the ToF readings out of the navigation; ``join_samples``: IMU batches joined to this
-    many samples (a replay at full speed: ``_imu_and_readings``); the navigator runs at the rate
-    the unit's clock gives (``_at_clock_rate``; ``on_rate(clock rate, rate asked for)`` when they
+    many samples (a replay at full speed: ``footnav.app.stream``); the navigator runs at the rate
+    the unit's clock gives (``footnav.app.stream.at_clock_rate``; ``on_rate(clock rate, rate asked for)`` when they
     differ). Closes the unit."""
     result = result if result is not None else SerialSessionResult()
     name = unit.link.name
@@ -567,7 +311,7 @@ async def run_unit_session(
                 await unit.start(mode)
             if extensions:
                 await unit.enable_extensions(tof=True, baro=True)
-        samples = _session_samples(
+        samples = session_samples(
             unit,
             result,
             expect_samples,
@@ -581,9 +325,9 @@ async def run_unit_session(
             raw=isinstance(mode, RawImuMode),
             join_samples=join_samples,
         )
-        samples = _at_clock_rate(samples, navigator, result, on_rate)
+        samples = at_clock_rate(samples, navigator, result, on_rate)
         if stored is not None and mode is None:
-            samples = _corrected(samples, stored.calibration)
+            samples = corrected(samples, stored.calibration)
         await run_pipeline(samples, navigator, [*sinks, keep_last])
     finally:
         result.link = unit.stats

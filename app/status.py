@@ -1,4 +1,5 @@
-"""The one-line terminal status: rate, loss, stance, distance per foot; updated in place on a terminal."""
+"""What the terminal shows: the one-line status (rate, loss, stance, distance per foot), updated in place
+on a terminal, and the progress bars of a fast replay and of an evaluation."""
 
 from __future__ import annotations
 
@@ -184,6 +185,29 @@ class Progress:
     def finish(self) -> None:
         if self.tty:
             self.stream.write("\r\x1b[2K" + self.text() + "\n")
+            self.stream.flush()
+
+
+class ProgressBar:
+    """``ProgressBar(total, label)``; call :meth:`step` with a note per item, :meth:`close` at the end."""
+
+    def __init__(self, total: int, label: str, stream: TextIO = sys.stderr, width: int = 30) -> None:
+        self.total, self.label, self.stream, self.width = max(1, total), label, stream, width
+        self.done = 0
+        self.tty = stream.isatty()
+
+    def step(self, note: str = "") -> None:
+        self.done += 1
+        if not self.tty:
+            return
+        filled = round(self.width * self.done / self.total)
+        bar = "#" * filled + "-" * (self.width - filled)
+        self.stream.write(f"\r\x1b[2K{self.label} [{bar}] {self.done}/{self.total} {note}")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
             self.stream.flush()
 
 

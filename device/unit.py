@@ -281,8 +281,8 @@ class OpenShoeUnit:
         Parameters
         ----------
         rate_divider_log2
-            output every 2**k samples, k = 0..6: 1000, 500, ... 15.625 Hz at the
-            1 kHz base rate (default 0: every sample).
+            output every 2**k samples of the unit's base rate, k = 0..14 (default 0: every
+            sample).
         with_bias_estimation
             use 0x41 (on-board gyro-bias estimation; output starts after 128
             samples and is delayed by the front-end buffer).

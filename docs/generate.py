@@ -16,6 +16,8 @@ import sys
 from pathlib import Path
 
 REFERENCE = Path(__file__).resolve().parent / "reference"
+GENERATED_WITH = (3, 11)
+"""The Python the committed pages were written with: argparse's help layout changes between versions."""
 HELP_COLUMNS = "100"
 """Width argparse wraps the help to (its ``COLUMNS``), so the page does not depend on the terminal."""
 
@@ -38,8 +40,19 @@ def _block(text: str) -> list[str]:
 
 
 def cli_page() -> str:
-    """Every command's help, then each experiment's."""
+    """Every command's help, then each experiment's (argparse wraps to ``COLUMNS``, set meanwhile)."""
+    columns = os.environ.get("COLUMNS")
     os.environ["COLUMNS"] = HELP_COLUMNS
+    try:
+        return _cli_page()
+    finally:
+        if columns is None:
+            del os.environ["COLUMNS"]
+        else:
+            os.environ["COLUMNS"] = columns
+
+
+def _cli_page() -> str:
     from footnav.app.experiments import EXPERIMENTS, experiment_module
     from footnav.app.parser import build_parser
 
@@ -75,10 +88,10 @@ def main(argv: list[str] | None = None) -> int:
         path = REFERENCE / name
         text = make()
         if args.check:
-            if not path.exists() or path.read_text() != text:
+            if not path.exists() or path.read_text(encoding="utf-8") != text:
                 stale.append(str(path))
         else:
-            path.write_text(text)
+            path.write_text(text, encoding="utf-8")
             print(f"wrote {path}")
     if stale:
         print(f"out of date (run python docs/generate.py): {', '.join(stale)}", file=sys.stderr)

@@ -83,7 +83,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     table = json.loads(args.json.read_text())
     causal = {r["name"]: r for r in table["causal"]}
-    smoothed = {r["name"]: r for r in table.get("whole", table["causal"])}
+    if "whole" not in table:
+        raise SystemExit(f"{args.json} has no smoothed figures: run benchmarks.accuracy without --no-smooth")
+    smoothed = {r["name"]: r for r in table["whole"]}
     trials = sorted(n for n, r in causal.items() if r["format"] == "pyshoe")
     IMAGES.mkdir(exist_ok=True)
     series: dict[str, list[float | None]] = {

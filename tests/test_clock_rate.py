@@ -92,7 +92,7 @@ async def test_the_emulator_streams_at_every_divider(k: int) -> None:
     got = ImuBatch.concat(batches)
     assert len(got) == expected
     np.testing.assert_allclose(np.diff(got.t_s), 2**k / 1000.0, rtol=1e-9)  # whole 64 MHz ticks
-    assert clock_rate_hz(got.t_s) in (1000.0 / 2**k, None)  # None: fewer than 8 intervals (K = 14)
+    assert clock_rate_hz(got.t_s) == (None if k == 14 else 1000.0 / 2**k)  # K = 14: three packets
 
 
 def test_a_retimed_navigator_is_one_built_for_that_rate() -> None:
@@ -121,3 +121,49 @@ def test_retiming_a_step_smoother_resizes_its_windows() -> None:
     built = StepSmoothingNavigator(config, 62.5)
     assert (retimed.close_after, retimed.max_window) == (built.close_after, built.max_window)
     assert retimed.detector.window == built.detector.window and retimed.rate_hz == 62.5
+
+
+def _imu(t_s: np.ndarray) -> ImuBatch:
+    n = t_s.size
+    acc = np.tile([0.0, 0.0, 9.81], (n, 1))
+    return ImuBatch(t_s, acc, np.zeros((n, 3)), np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64))
+
+
+async def _through_clock(items: list[object], navigator: Navigator) -> tuple[list[object], list[tuple[float, float]]]:
+    from footnav.app.stream import SerialSessionResult, at_clock_rate
+
+    async def source():  # type: ignore[no-untyped-def]
+        for item in items:
+            yield item
+
+    told: list[tuple[float, float]] = []
+    out = [x async for x in at_clock_rate(source(), navigator, SerialSessionResult(), lambda a, b: told.append((a, b)))]
+    return out, told
+
+
+def test_the_held_samples_and_readings_pass_in_order_and_a_tick_of_jitter_is_no_other_rate() -> None:
+    from footnav.pipeline.aiding.tof_types import RangeBatch
+
+    t = np.arange(40) / 1000.0
+    t[5] += 1 / TICK_HZ  # one tick of jitter
+    reading = RangeBatch(np.array([0.004]), np.array([0]), np.array([0.1]), np.array([0]))
+    items: list[object] = [_imu(t[:3]), reading, _imu(t[3:20]), _imu(t[20:])]
+    navigator = Navigator(NavConfig(profile=get_profile("mpu6500x4")), 1000.0)
+    out, told = asyncio.run(_through_clock(items, navigator))
+    assert out == items and told == [] and navigator.rate_hz == 1000.0
+
+
+def test_a_stream_that_ends_before_the_clock_gives_a_rate_is_still_passed_on() -> None:
+    items: list[object] = [_imu(np.arange(5) / 31.25)]
+    navigator = Navigator(NavConfig(profile=get_profile("mpu6500x4")), 125.0)
+    out, told = asyncio.run(_through_clock(items, navigator))
+    assert out == items and told == [] and navigator.rate_hz == 125.0
+
+
+def test_a_dual_imu_navigator_is_retimed_like_a_built_one() -> None:
+    from footnav.pipeline.dual_imu.navigator import DualNavConfig, DualNavigator
+
+    retimed = DualNavigator(DualNavConfig(), 1000.0)
+    retimed.retime(250.0)
+    built = DualNavigator(DualNavConfig(), 250.0)
+    assert retimed.rate_hz == 250.0 and retimed.detector.window == built.detector.window

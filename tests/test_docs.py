@@ -14,6 +14,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from types import ModuleType
 
+import pytest
 from footnav.app.config import defaults
 from footnav.app.config_reference import attribute_docs, markdown_table, rows
 from footnav.pipeline.navigation.profiles import UnitProfile
@@ -72,6 +73,9 @@ def test_the_command_reference_has_every_command() -> None:
 
 def test_the_generated_pages_are_current() -> None:
     """docs/reference/cli.md and configuration.md are what the code says now (python docs/generate.py)."""
+    generated_with = _docs_module("generate").GENERATED_WITH
+    if sys.version_info[:2] != generated_with:
+        pytest.skip(f"the pages were written with Python {generated_with}, whose argparse lays help out as they show")
     proc = subprocess.run(
         [sys.executable, str(ROOT / "docs" / "generate.py"), "--check"], capture_output=True, text=True, check=False
     )

@@ -98,11 +98,15 @@ def screenshot(
             if end > 0 and (end >= (end_s - 0.1) * 1e9 if end_s is not None else time.monotonic() - since > STABLE_S):
                 break
             if time.monotonic() > deadline:
-                raise ScreenshotError(f"the viewer did not load {rrd} up to {end_s:g} s within {timeout_s:.0f} s")
+                raise ScreenshotError(f"the viewer did not load {rrd} within {timeout_s:.0f} s")
             time.sleep(0.3)
         time.sleep(settle_s)
         client.save_screenshot(str(png))
     finally:
         viewer.terminate()
-        viewer.wait(20)
+        try:
+            viewer.wait(20)
+        except subprocess.TimeoutExpired:
+            viewer.kill()
+            viewer.wait()
         shutil.rmtree(home, ignore_errors=True)

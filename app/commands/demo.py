@@ -43,8 +43,9 @@ from footnav.app.feet import (
     run_feet,
     unit_header,
 )
-from footnav.app.session import SerialSessionResult, UnitAddress, run_device_session
+from footnav.app.session import UnitAddress, run_device_session
 from footnav.app.status import StatusLine, input_handling
+from footnav.app.stream import SerialSessionResult
 from footnav.device.emulator.motion.floors import floor_of
 from footnav.device.emulator.motion.gait import GaitTruth, simulate_walk
 from footnav.device.emulator.scripts import BaroScript, TofScript, baro_from_height

@@ -14,8 +14,7 @@ from pathlib import Path
 
 import numpy as np
 from footnav.app.commands.export import navigate_recording
-from footnav.app.progress import ProgressBar
-from footnav.app.status import input_handling
+from footnav.app.status import ProgressBar, input_handling
 from footnav.device.files.recordings import detect_format, load_recording
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.metrics import armse_2d_pyshoe, ate, loop_closure_error, path_length_m

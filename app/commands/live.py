@@ -44,6 +44,7 @@ from footnav.app.feet import (
 from footnav.app.session import UnitAddress, run_device_session
 from footnav.app.status import StatusLine
 from footnav.device.modes import RawImuMode
+from footnav.device.protocol.commands import MAX_RATE_DIVIDER_LOG2, MAX_RAW_RATE_DIVIDER_LOG2
 from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
 from footnav.pipeline.dual_imu.navigator import DualNavigator
 from footnav.pipeline.errors import FootnavError
@@ -132,8 +133,13 @@ async def live_session(opts: LiveOptions) -> int:
     """:func:`run_live` on the running event loop (cancel it to stop, as Ctrl-C does)."""
     cfg = opts.config
     rate_divider = int(cfg["unit.rate_divider"])
-    if not 0 <= rate_divider <= 6:
-        raise FootnavError(f"rate divider must be 0..6, got {rate_divider} ({cfg.source('unit.rate_divider')})")
+    raw_output = opts.dual_imu_lever_b_m is not None
+    top = MAX_RAW_RATE_DIVIDER_LOG2 if raw_output else MAX_RATE_DIVIDER_LOG2
+    if not 0 <= rate_divider <= top:
+        what = "the dual-IMU board's raw output" if raw_output else "the calibrated IMU output"
+        raise FootnavError(
+            f"rate divider must be 0..{top} for {what}, got {rate_divider} ({cfg.source('unit.rate_divider')})"
+        )
     addresses = {foot: UnitAddress.parse(text) for foot, text in opts.ports.items()}
     dividers = {foot: rate_divider_for(address, cfg) for foot, address in addresses.items()}
     feet = tuple(opts.ports)

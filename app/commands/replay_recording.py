@@ -1,6 +1,7 @@
 """``footnav replay RECORDING``: a recording from another tool navigated and shown in Rerun.
 
-The recording (PyShoe ``.mat``, x-io CSV, OpenShoe log, generic CSV: ``footnav.device.files.recordings``)
+The recording (PyShoe ``.mat``, x-io CSV, OpenShoe log, generic CSV, a unit's raw log:
+``footnav.device.files.recordings``)
 is navigated whole, exactly as ``footnav export`` navigates it (``navigate_recording``: the causal
 filter, or a smoother with ``smooth``), and its track goes to the same Rerun views as a live session's.
 Where the recording has ground truth (the PyShoe VICON trials), the truth is shown too, turned and

@@ -13,7 +13,8 @@ payload length the stream carries most:
   the mean of the k IMUs in SI units (registers times the per-IMU scale), which assumes their axes are
   aligned, as on the MIMU boards.
 
-Repeated package numbers (lossless resends) are kept once; the sample rate is the unit's clock's
+A package number is taken the first time the count moves past it (resends and late packets are
+dropped); the sample rate is the unit's clock's
 (:func:`footnav.device.protocol.imu.clock_rate_hz`).
 """
 
@@ -58,11 +59,15 @@ def looks_like_log(head: bytes) -> bool:
 
 
 def _unique_in_order(numbers: NDArray[np.int64]) -> NDArray[np.bool_]:
-    """Packets to keep: each package number (uint16, unwrapped) once, in the order first received."""
-    steps = np.diff(numbers, prepend=numbers[0] - 1) % 65536
-    forward = (steps > 0) & (steps < 32768)
-    keep = np.ones(numbers.size, dtype=bool)
-    keep[1:] = forward[1:]
+    """Packets to keep: each package number (uint16 as sent) the first time the count moves past it.
+
+    The numbers are unwrapped by their signed steps modulo 2**16; a packet is kept when its number is
+    beyond every number before it, so a resent run (``1 2 3 4 5 2 3 4 6``) and a late packet are
+    dropped whole and the kept packets stay in their order."""
+    steps = (np.diff(numbers, prepend=numbers[0]) + 32768) % 65536 - 32768
+    unwrapped = np.cumsum(steps)
+    before = np.concatenate([[unwrapped[0] - 1], np.maximum.accumulate(unwrapped)[:-1]])
+    keep: NDArray[np.bool_] = unwrapped > before
     return keep
 
 
@@ -122,12 +127,12 @@ def decode_log(data: bytes, name: str) -> tuple[F64, F64, F64, list[str]]:
         what = f"raw registers 0x28 of {layout.n_imus} IMU(s), averaged"
     ticks, acc, gyr = decoded
     t_s = TickUnwrapper().update(ticks)
-    repeats = int(np.count_nonzero(~keep))
-    others = len(packets) - len(stream) - repeats
+    dropped = int(np.count_nonzero(~keep))
+    others = len(packets) - len(stream) - dropped
     notes = [f"{len(stream)} packets of the {what}"]
     notes += [f"{skipped} bytes between packets skipped"] if skipped else []
     notes += [f"{others} packets of other lengths ignored"] if others else []
-    notes += [f"{repeats} repeated packets kept once"] if repeats else []
+    notes += [f"{dropped} resent or late packets dropped"] if dropped else []
     return t_s - t_s[0], acc, gyr, notes
 
 

@@ -125,7 +125,9 @@ COMMAND_PAYLOAD_LENGTHS: Final[dict[int, int]] = {
 
 # Mode byte (0x20, 0x21, 0x28, 0x40, 0x41): response_util.h.
 MODE_RATE_MASK: Final = 0x0F
-"""The rate field d of 0x20, 0x21, 0x40 and 0x41: 4 bits (GT Silicon's logging tool sends d up to 15)."""
+"""The rate field d of 0x20, 0x21, 0x40 and 0x41: 4 bits on GT Silicon's firmware (its logging tool
+sends d up to 15, and a unit streamed at 7.8125 Hz with d = 8); OpenShoe's 2016 framework reads 3
+(``OUTPUT_DIVIDER_MASK 0x07`` in ``response_util.h``), so there d = 8..15 is off or wraps to 0..7."""
 RAW_MODE_RATE_MASK: Final = 0x07
 """The rate field of 0x28: 3 bits, for its bit 3 is :data:`MODE_MAGNETOMETER`."""
 MODE_MAGNETOMETER: Final = 0x08

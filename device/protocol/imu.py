@@ -142,21 +142,24 @@ class TickUnwrapper:
         return total / TICK_HZ
 
 
-CLOCK_RATE_INTERVALS: Final = 8
-"""Sample intervals the unit's clock must have given before :func:`clock_rate_hz` names a rate."""
+CLOCK_RATE_INTERVALS: Final = 16
+"""Positive sample intervals :func:`clock_rate_hz` takes the rate from (the first ones of a stream)."""
 
 
 def clock_rate_hz(t_s: NDArray[np.float64]) -> float | None:
-    """The stream's sample rate by the unit's own clock, Hz: :data:`TICK_HZ` over the median interval
-    of the device times ``t_s`` (n,), s, in whole ticks; None before :data:`CLOCK_RATE_INTERVALS`
-    positive intervals. A lost packet makes one long interval and a repeated sample a zero one: the
-    median ignores both, and whole ticks give the nominal rate exactly (64 000 ticks: 1000 Hz;
-    78 125: 819.2 Hz; 2 048 000: 31.25 Hz)."""
+    """The stream's sample rate by the unit's own clock, Hz: :data:`TICK_HZ` over the lower quartile of
+    the first :data:`CLOCK_RATE_INTERVALS` positive intervals of the device times ``t_s`` (n,), s, in
+    whole ticks; None before there are as many.
+
+    The first intervals only, so a stream gives the same rate however its samples are batched. A
+    repeated sample makes a zero interval, which is not counted; a lost packet makes a long one, and
+    the lower quartile holds while fewer than three in four of the intervals span losses. Whole ticks
+    give the nominal rate exactly (64 000 ticks: 1000 Hz; 78 125: 819.2 Hz; 2 048 000: 31.25 Hz)."""
     dt_s = np.diff(np.asarray(t_s, dtype=np.float64))
-    dt_s = dt_s[dt_s > 0]
+    dt_s = dt_s[dt_s > 0][:CLOCK_RATE_INTERVALS]
     if dt_s.size < CLOCK_RATE_INTERVALS:
         return None
-    return TICK_HZ / max(1, round(float(np.median(dt_s)) * TICK_HZ))
+    return TICK_HZ / max(1, round(float(np.percentile(dt_s, 25)) * TICK_HZ))
 
 
 class CounterTracker:

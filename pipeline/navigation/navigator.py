@@ -269,7 +269,7 @@ class Navigator:
 
     def retime(self, rate_hz: float) -> None:
         """Navigate at ``rate_hz`` instead of the rate given at construction (the unit's clock has
-        told the real one); only before the first sample or reading.
+        told the real one); only before the first sample.
 
         Raises
         ------

@@ -423,8 +423,6 @@ class _CheckpointingNavigator(Navigator):
 
     def __init__(self, config: NavConfig, rate_hz: float, segment_samples: int) -> None:
         super().__init__(config, rate_hz)
-        # the stance levels as constants, so that the updates are of the 15 states the passes store
-        self.levels = StanceLevels(StanceLevelParams(use=config.stance_levels, level_states=0), rate_hz)
         self.level_updates = []
         self.segment_samples = segment_samples
         self.checkpoints: list[tuple[int, F64, F64, float, int, NDArray[np.int64]]] = []
@@ -432,6 +430,11 @@ class _CheckpointingNavigator(Navigator):
         been applied (one due after the sample before the segment is applied in the segment's own
         run, after its checkpoint), and the filter's carried state (the stance it is in)."""
         self.inputs: list[tuple[ImuBatch, NDArray[np.bool_], F64]] = []  # samples, stance, T/γ
+
+    def _init_rate(self, rate_hz: float) -> None:
+        super()._init_rate(rate_hz)
+        # the stance levels as constants, so that the updates are of the 15 states the passes store
+        self.levels = StanceLevels(StanceLevelParams(use=self.config.stance_levels, level_states=0), rate_hz)
 
     def _run(self, batch: ImuBatch, stat: F64, threshold: F64, still: NDArray[np.bool_]) -> NavBatch:
         assert self._x is not None
