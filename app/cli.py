@@ -96,6 +96,7 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
             tof=args.tof,
             stance=args.stance,
             dual_imu_lever_b_m=(_lever(args.lever_arm) or DEFAULT_LEVER_B_M) if args.dual_imu else None,
+            fused_imu_mask=args.imu_mask if args.mode == "raw" else None,
         )
     )
 

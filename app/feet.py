@@ -108,11 +108,16 @@ def unit_header(
     extensions: bool = False,
     stance: str = "inertial",
     dual_imu_lever_b_m: tuple[float, float, float] | None = None,
+    fused_imu_mask: int | None = None,
 ) -> UnitHeader:
     """The capture header of one unit; ``extensions``: the ToF and barometer states were switched on
     (a replay then repeats that handshake); ``stance``: the ToF units' stance detector mode;
-    ``dual_imu_lever_b_m``: a dual-IMU board streaming raw 0x28 with that lever arm."""
+    ``dual_imu_lever_b_m``: a dual-IMU board streaming raw 0x28 with that lever arm;
+    ``fused_imu_mask``: the raw 0x28 registers of these IMUs, averaged into one IMU."""
     dual = {} if dual_imu_lever_b_m is None else {"dual_imu_lever_b_m": list(dual_imu_lever_b_m)}
+    fused = {} if fused_imu_mask is None else {"fused_imu_mask": fused_imu_mask}
+    mode = "normal_imu" if dual_imu_lever_b_m is None else "dual_imu_raw"
+    mode = "raw_imu_fused" if fused_imu_mask is not None else mode
     return UnitHeader(
         foot=foot,
         unit=UNIT_KIND,
@@ -120,13 +125,14 @@ def unit_header(
         transport=transport,
         port=port,
         settings={
-            "mode": "normal_imu" if dual_imu_lever_b_m is None else "dual_imu_raw",
+            "mode": mode,
             "rate_divider_log2": rate_divider_log2,
             "rate_hz": BASE_RATE_HZ / 2**rate_divider_log2,
             "nav_config": config.to_json(),
             "extensions": extensions,
             "stance": stance,
             **dual,
+            **fused,
         },
         calibration={
             "on_unit": "factory calibration applied by the unit (calibrated output 0x40)",

@@ -185,6 +185,20 @@ def _add_live_command(sub: Commands) -> None:
         help="a dual-IMU board: stream both IMUs (raw output 0x28, mask 0b11) to the dual-IMU filter",
     )
     live.add_argument(
+        "--mode",
+        choices=("imu", "raw"),
+        default="imu",
+        help="imu: the unit's calibrated IMU output 0x40 (default); raw: the raw registers 0x28 of the IMUs "
+        "in --imu-mask, averaged into one IMU as the unit's own array firmware does",
+    )
+    live.add_argument(
+        "--imu-mask",
+        type=lambda t: int(t, 0),
+        default=0x0F,
+        metavar="MASK",
+        help="with --mode raw: the IMUs to stream and average (default 0x0F: the four of a MIMU board)",
+    )
+    live.add_argument(
         "--lever-arm",
         type=float,
         nargs=3,

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
 from footnav.app.status import FootStatus, StatusLine
-from footnav.app.stream import IDLE_NOTICE_S, SerialSessionResult, at_clock_rate, corrected, session_samples
+from footnav.app.stream import IDLE_NOTICE_S, SerialSessionResult, at_clock_rate, corrected, fused_imus, session_samples
 from footnav.device.errors import DeviceError
 from footnav.device.links.base import CaptureTap
 from footnav.device.links.reconnecting import LinkEvent, ReconnectingLink
@@ -199,6 +199,7 @@ async def run_device_session(
     mode: Mode | None = None,
     extensions: bool = False,
     on_rate: Callable[[float, float], None] | None = None,
+    fuse_imus: bool = False,
 ) -> SerialSessionResult:
     """Open the unit at ``address`` through a :class:`~footnav.device.links.reconnecting.ReconnectingLink`, start
     its IMU
@@ -219,7 +220,8 @@ async def run_device_session(
     ``mode``: the output mode to start (None: the calibrated-IMU stream at ``rate_divider_log2``);
     ``RawImuMode`` streams ``RawImuBatch`` es (e.g. the dual-IMU board) to a matching navigator;
     ``extensions``: also switch on the unit's ToF and barometer states (footnav's extension states
-    0xE1/0xE2); their readings go to the navigator; ``on_rate``: see :func:`run_unit_session`.
+    0xE1/0xE2); their readings go to the navigator; ``on_rate``, ``fuse_imus``: see
+    :func:`run_unit_session`.
 
     Raises
     ------
@@ -245,6 +247,7 @@ async def run_device_session(
         mode=mode,
         extensions=extensions,
         on_rate=on_rate,
+        fuse_imus=fuse_imus,
     )
 
 
@@ -270,6 +273,7 @@ async def run_unit_session(
     use_ranges: bool = True,
     join_samples: int = 0,
     on_rate: Callable[[float, float], None] | None = None,
+    fuse_imus: bool = False,
 ) -> SerialSessionResult:
     """Navigate an open unit's stream (see :func:`run_device_session`); ``start=False`` for a replay,
     where the captured bytes already hold the start and no stop is sent; ``idle_notice_s=None`` never
@@ -280,7 +284,8 @@ async def run_unit_session(
     leaves the ToF readings out of the navigation; ``join_samples``: IMU batches joined to this
     many samples (a replay at full speed: ``footnav.app.stream``); the navigator runs at the rate
     the unit's clock gives (``footnav.app.stream.at_clock_rate``; ``on_rate(clock rate, rate asked for)`` when they
-    differ). Closes the unit."""
+    differ); ``fuse_imus``: a ``RawImuMode`` stream's IMUs averaged into one IMU for a single-IMU
+    navigator (``footnav.app.stream.fused_imus``). Closes the unit."""
     result = result if result is not None else SerialSessionResult()
     name = unit.link.name
 
@@ -325,6 +330,8 @@ async def run_unit_session(
             raw=isinstance(mode, RawImuMode),
             join_samples=join_samples,
         )
+        if fuse_imus:
+            samples = fused_imus(samples)
         samples = at_clock_rate(samples, navigator, result, on_rate)
         if stored is not None and mode is None:
             samples = corrected(samples, stored.calibration)

@@ -291,3 +291,15 @@ async def _imu_and_readings(
             yield batch
         if held:
             yield ImuBatch.concat(held)
+
+
+async def fused_imus(samples: AsyncIterator[Any]) -> AsyncIterator[Any]:
+    """The raw multi-IMU batches (0x28) as one IMU: the mean of the IMUs' SI readings at each sample,
+    as OpenShoe's array firmware averages its IMUs for the calibrated output 0x40 (which assumes their
+    axes aligned, as on the MIMU boards); other readings pass through."""
+    async for item in samples:
+        if isinstance(item, RawImuBatch):
+            acc, gyr = item.acc_b_mps2.mean(axis=1), item.gyr_b_radps.mean(axis=1)
+            yield ImuBatch(item.t_s, acc, gyr, item.counter, item.host_ns)
+        else:
+            yield item

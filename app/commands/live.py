@@ -96,6 +96,9 @@ class LiveOptions:
     dual_imu_lever_b_m
         the units are dual-IMU boards with IMU 2 at this lever arm in IMU 1's
         axes, m: their raw two-IMU output (0x28, mask 0b11) goes to the dual-IMU navigator.
+    fused_imu_mask
+        stream the raw registers (0x28) of the IMUs in this mask and navigate their mean as one IMU
+        (``footnav.app.stream.fused_imus``) instead of the unit's calibrated output 0x40.
     stance
         stance detector mode with ToF units (``footnav.pipeline.stance.height_detector.HeightDetectorParams``).
     """
@@ -112,6 +115,7 @@ class LiveOptions:
     tof: bool = False
     stance: str = "inertial"
     dual_imu_lever_b_m: tuple[float, float, float] | None = None
+    fused_imu_mask: int | None = None
 
 
 def run_live(opts: LiveOptions) -> int:
@@ -133,10 +137,10 @@ async def live_session(opts: LiveOptions) -> int:
     """:func:`run_live` on the running event loop (cancel it to stop, as Ctrl-C does)."""
     cfg = opts.config
     rate_divider = int(cfg["unit.rate_divider"])
-    raw_output = opts.dual_imu_lever_b_m is not None
+    raw_output = opts.dual_imu_lever_b_m is not None or opts.fused_imu_mask is not None
     top = MAX_RAW_RATE_DIVIDER_LOG2 if raw_output else MAX_RATE_DIVIDER_LOG2
     if not 0 <= rate_divider <= top:
-        what = "the dual-IMU board's raw output" if raw_output else "the calibrated IMU output"
+        what = "the raw output 0x28" if raw_output else "the calibrated IMU output"
         raise FootnavError(
             f"rate divider must be 0..{top} for {what}, got {rate_divider} ({cfg.source('unit.rate_divider')})"
         )
@@ -148,6 +152,9 @@ async def live_session(opts: LiveOptions) -> int:
     dual = opts.dual_imu_lever_b_m
     if dual is not None and opts.tof:
         raise FootnavError("a unit is either a dual-IMU board or a ToF unit: give --dual-imu or --tof, not both")
+    fused = opts.fused_imu_mask
+    if fused is not None and (dual is not None or opts.tof):
+        raise FootnavError("--mode raw streams the raw IMUs of a unit without ToF; drop --dual-imu and --tof")
     heap.limit_arenas()  # before the viewer's and the capture's threads start
     views, notes = open_session_views(
         save=opts.save,
@@ -196,11 +203,13 @@ async def live_session(opts: LiveOptions) -> int:
                     extensions=opts.tof,
                     stance=opts.stance,
                     dual_imu_lever_b_m=dual,
+                    fused_imu_mask=fused,
                 )
             )
 
     async def session(run: FootRun) -> None:
-        raw = RawImuMode(imu_mask=DUAL_IMU_MASK, rate_divider_log2=run.rate_divider_log2)
+        mask = fused if fused is not None else DUAL_IMU_MASK
+        raw = RawImuMode(imu_mask=mask, rate_divider_log2=run.rate_divider_log2)
         await run_device_session(
             addresses[run.foot],
             run.navigator,
@@ -212,9 +221,12 @@ async def live_session(opts: LiveOptions) -> int:
             on_open=lambda unit: attach_unit(run, unit),
             on_link_event=link_reporter(run, views, capture, two_feet=two_feet),
             ble_backend=opts.ble_backend,
-            calibration=calibration_lookup(cfg, run.foot, capture, views, two_feet=two_feet) if dual is None else None,
+            calibration=None
+            if dual is not None or fused is not None
+            else calibration_lookup(cfg, run.foot, capture, views, two_feet=two_feet),
             extensions=opts.tof,
-            mode=raw if dual is not None else None,
+            mode=raw if dual is not None or fused is not None else None,
+            fuse_imus=fused is not None,
             on_rate=rate_reporter(run, views, two_feet=two_feet),
         )
 

@@ -248,6 +248,9 @@ def run_replay(opts: ReplayOptions) -> int:
         expect = ends.get(run.foot)
         settings = info.units[feet.index(run.foot)].settings
         rate_divider = int(settings.get("rate_divider_log2", 0))
+        fused_mask = settings.get("fused_imu_mask")
+        mask = int(fused_mask) if isinstance(fused_mask, int) else DUAL_IMU_MASK
+        raw = run.foot in lever_of or isinstance(fused_mask, int)
         await run_unit_session(
             unit,
             run.navigator,
@@ -265,7 +268,8 @@ def run_replay(opts: ReplayOptions) -> int:
             extensions=bool(settings.get("extensions", False)),
             use_ranges=opts.tof,
             join_samples=FULL_SPEED_JOIN_SAMPLES if math.isinf(opts.speed) else 0,
-            mode=RawImuMode(imu_mask=DUAL_IMU_MASK, rate_divider_log2=rate_divider) if run.foot in lever_of else None,
+            mode=RawImuMode(imu_mask=mask, rate_divider_log2=rate_divider) if raw else None,
+            fuse_imus=isinstance(fused_mask, int),
             on_rate=rate_reporter(run, views, two_feet=len(feet) > 1),
         )
 
