@@ -69,6 +69,17 @@ def _add_step_smoothing_arg(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_lever_arm_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--lever-arm",
+        type=float,
+        nargs=3,
+        default=None,
+        metavar=("X", "Y", "Z"),
+        help="with --dual-imu: IMU 2's position in IMU 1's axes, m (default 0.01 0.01 0)",
+    )
+
+
 def _add_output_args(p: argparse.ArgumentParser, *, capture: bool) -> None:
     p.add_argument("--save", type=Path, metavar="FILE.rrd", help="also write the recording to this file")
     p.add_argument("--no-viewer", action="store_true", help="do not open a viewer (save only)")
@@ -137,14 +148,7 @@ def _add_demo_command(sub: Commands) -> None:
         help="a dual-IMU board (two IMUs on one PCB, raw output 0x28, IMU mask 0b11) navigated by footnav's "
         "dual-IMU filter",
     )
-    demo.add_argument(
-        "--lever-arm",
-        type=float,
-        nargs=3,
-        default=None,
-        metavar=("X", "Y", "Z"),
-        help="with --dual-imu: IMU 2's position in IMU 1's axes, m (default 0.01 0.01 0)",
-    )
+    _add_lever_arm_arg(demo)
     demo.add_argument(
         "--board-lever-arm",
         type=float,
@@ -198,14 +202,7 @@ def _add_live_command(sub: Commands) -> None:
         metavar="MASK",
         help="with --mode raw: the IMUs to stream and average (default 0x0F: the four of a MIMU board)",
     )
-    live.add_argument(
-        "--lever-arm",
-        type=float,
-        nargs=3,
-        default=None,
-        metavar=("X", "Y", "Z"),
-        help="with --dual-imu: IMU 2's position in IMU 1's axes, m (default 0.01 0.01 0)",
-    )
+    _add_lever_arm_arg(live)
     _add_config_args(live)
     _add_step_smoothing_arg(live)
     _add_stance_arg(live, default="inertial")
