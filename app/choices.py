@@ -14,3 +14,5 @@ PROFILES = ("adis16367", "generic", "gx3", "mpu6500x4")
 """Built-in unit profiles: the keys of :data:`footnav.pipeline.navigation.profiles.PROFILES`."""
 RECORDING_FORMATS = ("csv", "mimu-log", "openshoe", "pyshoe", "xio")
 """Recording formats: the keys of :data:`footnav.device.files.recordings.LOADERS`."""
+UNIT_MODELS = ("mimu22bl", "mimu22bt", "mimu4444", "oblu", "openshoe")
+"""Unit models: the keys of :data:`footnav.device.models.UNIT_MODELS`."""

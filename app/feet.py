@@ -29,6 +29,9 @@ from footnav.app.stream import SerialSessionResult
 from footnav.device.errors import DeviceError
 from footnav.device.files.capture import CaptureTap, CaptureWriter, UnitHeader
 from footnav.device.links.reconnecting import LinkEvent, LinkGap, ReconnectingLink
+from footnav.device.models import DEFAULT_MODEL, UnitModel
+from footnav.device.onboard import OnboardInsNavigator, OnboardStepNavigator
+from footnav.device.protocol.commands import STATE_IMU_TS, STATE_P, STATE_POSITION, STATE_QUATERNION, STATE_VELOCITY
 from footnav.device.unit import OpenShoeUnit
 from footnav.pipeline.aiding.tof_types import TofConfig
 from footnav.pipeline.dual_imu.board_eskf import DualEskfConfig
@@ -50,7 +53,9 @@ FOOT_START_OFFSET_M: dict[str, tuple[float, float, float]] = {
 navigator starts at its own origin; this offset is for display only)."""
 
 UNIT_KIND = "OpenShoe/MIMU/Oblu, calibrated IMU output (0x40)"
-BASE_RATE_HZ = 1000.0
+ONBOARD_TITLES = {"ins": "INS states", "steps": "stepwise dead reckoning"}
+ONBOARD_INS_STATES = (STATE_IMU_TS, STATE_POSITION, STATE_VELOCITY, STATE_QUATERNION, STATE_P)
+"""The INS states a session asks the unit for: time stamp, position, velocity, attitude, covariance."""
 
 
 def notice(text: str) -> None:
@@ -109,25 +114,33 @@ def unit_header(
     stance: str = "inertial",
     dual_imu_lever_b_m: tuple[float, float, float] | None = None,
     fused_imu_mask: int | None = None,
+    onboard: str | None = None,
+    model: UnitModel = DEFAULT_MODEL,
 ) -> UnitHeader:
     """The capture header of one unit; ``extensions``: the ToF and barometer states were switched on
     (a replay then repeats that handshake); ``stance``: the ToF units' stance detector mode;
     ``dual_imu_lever_b_m``: a dual-IMU board streaming raw 0x28 with that lever arm;
-    ``fused_imu_mask``: the raw 0x28 registers of these IMUs, averaged into one IMU."""
+    ``fused_imu_mask``: the raw 0x28 registers of these IMUs, averaged into one IMU; ``onboard``:
+    the unit's own solution, "ins" (its INS states :data:`ONBOARD_INS_STATES`) or "steps" (its
+    stepwise dead reckoning); ``model``: the unit model told (its base rate gives the rate asked)."""
     dual = {} if dual_imu_lever_b_m is None else {"dual_imu_lever_b_m": list(dual_imu_lever_b_m)}
     fused = {} if fused_imu_mask is None else {"fused_imu_mask": fused_imu_mask}
     mode = "normal_imu" if dual_imu_lever_b_m is None else "dual_imu_raw"
     mode = "raw_imu_fused" if fused_imu_mask is not None else mode
+    mode = onboard or mode
+    states = {"ins_state_ids": list(ONBOARD_INS_STATES)} if onboard == "ins" else {}
     return UnitHeader(
         foot=foot,
-        unit=UNIT_KIND,
+        unit=UNIT_KIND if onboard is None else f"{model.title}, on-board {ONBOARD_TITLES[onboard]}",
         command_set="openshoe (2015 set, 2014 probed)",
         transport=transport,
         port=port,
         settings={
             "mode": mode,
+            "model": model.name,
             "rate_divider_log2": rate_divider_log2,
-            "rate_hz": BASE_RATE_HZ / 2**rate_divider_log2,
+            "rate_hz": model.rate_hz(rate_divider_log2),
+            **states,
             "nav_config": config.to_json(),
             "extensions": extensions,
             "stance": stance,
@@ -147,7 +160,7 @@ class FootRun:
 
     foot: str
     port: str
-    navigator: Navigator | DualNavigator
+    navigator: Navigator | DualNavigator | OnboardInsNavigator | OnboardStepNavigator
     result: SerialSessionResult = field(default_factory=SerialSessionResult)
     tap: CaptureTap | None = None
     health: LinkHealth | None = None
@@ -295,7 +308,7 @@ def foot_sinks(
         display: NavSink = views.sink(run.foot, timeout_s=put_timeout_s)
         if two_feet and run.foot in FOOT_START_OFFSET_M:
             display = offset_sink(display, FOOT_START_OFFSET_M[run.foot])
-        run.health = LinkHealth(views.log_link, run.foot)
+        run.health = LinkHealth(views.log_link, run.foot, clock_rate_hz=lambda: run.result.clock_rate_hz)
         run.sinks = [display, run.health, *run.sinks]
 
 
@@ -390,6 +403,7 @@ def foot_run(
     tof: TofConfig | None = None,
     dual_lever_b_m: tuple[float, float, float] | None = None,
     rate_divider_log2: int = 0,
+    onboard: str | None = None,
 ) -> FootRun:
     """One foot of a session, its navigator and gait events made from the session's settings.
 
@@ -408,9 +422,16 @@ def foot_run(
         (:class:`~footnav.pipeline.dual_imu.navigator.DualNavigator`) instead of the single-IMU one.
     rate_divider_log2
         The unit's rate divider K: every 2**K-th sample of its base rate.
+    onboard
+        "ins" or "steps": the unit's own solution is shown instead of footnav's
+        (:mod:`footnav.device.onboard`).
     """
-    navigator: Navigator | DualNavigator
-    if dual_lever_b_m is not None:
+    navigator: Navigator | DualNavigator | OnboardInsNavigator | OnboardStepNavigator
+    if onboard == "ins":
+        navigator, events = OnboardInsNavigator(rate_hz), GaitEventTracker()
+    elif onboard == "steps":
+        navigator, events = OnboardStepNavigator(), GaitEventTracker()
+    elif dual_lever_b_m is not None:
         navigator = DualNavigator(dual_nav_config(nav_config, dual_lever_b_m), rate_hz=rate_hz)
         events = GaitEventTracker()
     else:

@@ -20,10 +20,10 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from footnav.app.status import FootStatus, StatusLine
 from footnav.app.stream import IDLE_NOTICE_S, SerialSessionResult, at_clock_rate, corrected, fused_imus, session_samples
-from footnav.device.errors import DeviceError
+from footnav.device.errors import DeviceError, UnsupportedModeError
 from footnav.device.links.base import CaptureTap
 from footnav.device.links.reconnecting import LinkEvent, ReconnectingLink
-from footnav.device.modes import Mode, RawImuMode
+from footnav.device.modes import InsMode, Mode, NormalImuMode, RawImuMode, StepwiseMode
 from footnav.device.unit import LinkStats, OpenShoeUnit
 from footnav.pipeline.calibration.model import CalibrationError
 from footnav.pipeline.nav_types import NavBatch
@@ -38,6 +38,17 @@ log = logging.getLogger(__name__)
 LIVE_READ_INTERVAL_S = 0.010  # coalesce reads: about 10 packets a batch at 1 kHz (see OpenShoeUnit)
 LINK_HEALTH_PERIOD_S = 0.5
 """Link health (rate, loss, reconnects) is logged every this much device time."""
+
+
+def output_of(mode: Mode | None) -> str:
+    """The ``footnav.app.stream.session_samples`` output a mode streams (None: the calibrated IMU's)."""
+    if isinstance(mode, RawImuMode):
+        return "raw"
+    if isinstance(mode, InsMode):
+        return "ins"
+    if isinstance(mode, StepwiseMode):
+        return "steps"
+    return "imu"
 
 
 @dataclass(frozen=True)
@@ -137,7 +148,7 @@ async def open_unit_link(
 
 class LinkHealth:
     """A NavSink that logs link health every :data:`LINK_HEALTH_PERIOD_S` of device time: samples per
-    second of host receive time, cumulative lost packets and reconnects.
+    second of host receive time, the rate by the unit's clock, cumulative lost packets and reconnects.
 
     Host times come from the batches (in a replay, the captured ones), so replays log the same values.
     """
@@ -148,11 +159,13 @@ class LinkHealth:
         foot: str,
         stats: Callable[[], LinkStats] | None = None,
         reconnects: Callable[[], int] | None = None,
+        clock_rate_hz: Callable[[], float | None] | None = None,
     ) -> None:
         self._log = log
         self.foot = foot
         self.stats = stats
         self.reconnects = reconnects
+        self.clock_rate_hz = clock_rate_hz
         self._t_next: float | None = None
         self._n = 0
         self._host0: int | None = None
@@ -169,12 +182,14 @@ class LinkHealth:
         host1 = int(nav.host_ns[-1])
         span_s = (host1 - self._host0) / 1e9
         stats = self.stats() if self.stats is not None else None
+        clock = None if self.clock_rate_hz is None else self.clock_rate_hz()
         self._log(
             foot=self.foot,
             t_s=t_last,
             rate_hz=self._n / span_s if span_s > 0 else float("nan"),
             lost_packets=0 if stats is None else stats.lost_packets,
             reconnects=0 if self.reconnects is None else self.reconnects(),
+            clock_rate_hz=float("nan") if clock is None else clock,
         )
         self._n, self._host0 = 0, host1
         self._t_next = t_last + LINK_HEALTH_PERIOD_S
@@ -200,6 +215,7 @@ async def run_device_session(
     extensions: bool = False,
     on_rate: Callable[[float, float], None] | None = None,
     fuse_imus: bool = False,
+    on_stepwise_only: Callable[[str], BatchNavigator[Any]] | None = None,
 ) -> SerialSessionResult:
     """Open the unit at ``address`` through a :class:`~footnav.device.links.reconnecting.ReconnectingLink`, start
     its IMU
@@ -220,8 +236,8 @@ async def run_device_session(
     ``mode``: the output mode to start (None: the calibrated-IMU stream at ``rate_divider_log2``);
     ``RawImuMode`` streams ``RawImuBatch`` es (e.g. the dual-IMU board) to a matching navigator;
     ``extensions``: also switch on the unit's ToF and barometer states (footnav's extension states
-    0xE1/0xE2); their readings go to the navigator; ``on_rate``, ``fuse_imus``: see
-    :func:`run_unit_session`.
+    0xE1/0xE2); their readings go to the navigator; ``on_rate``, ``fuse_imus``, ``on_stepwise_only``:
+    see :func:`run_unit_session`.
 
     Raises
     ------
@@ -248,7 +264,28 @@ async def run_device_session(
         extensions=extensions,
         on_rate=on_rate,
         fuse_imus=fuse_imus,
+        on_stepwise_only=on_stepwise_only,
     )
+
+
+async def _start(
+    unit: OpenShoeUnit,
+    mode: Mode | None,
+    rate_divider_log2: int,
+    navigator: BatchNavigator[Any],
+    on_stepwise_only: Callable[[str], BatchNavigator[Any]] | None,
+) -> tuple[Mode | None, BatchNavigator[Any]]:
+    """Start ``mode`` (None: the calibrated IMU output); on firmware with stepwise output only, that
+    instead when ``on_stepwise_only`` gives its navigator. Returns the mode started and the navigator."""
+    try:
+        await unit.start(NormalImuMode(rate_divider_log2) if mode is None else mode)
+    except UnsupportedModeError as exc:
+        if on_stepwise_only is None:
+            raise
+        navigator = on_stepwise_only(str(exc))
+        mode = StepwiseMode()
+        await unit.start(mode)
+    return mode, navigator
 
 
 async def run_unit_session(
@@ -274,6 +311,7 @@ async def run_unit_session(
     join_samples: int = 0,
     on_rate: Callable[[float, float], None] | None = None,
     fuse_imus: bool = False,
+    on_stepwise_only: Callable[[str], BatchNavigator[Any]] | None = None,
 ) -> SerialSessionResult:
     """Navigate an open unit's stream (see :func:`run_device_session`); ``start=False`` for a replay,
     where the captured bytes already hold the start and no stop is sent; ``idle_notice_s=None`` never
@@ -285,7 +323,9 @@ async def run_unit_session(
     many samples (a replay at full speed: ``footnav.app.stream``); the navigator runs at the rate
     the unit's clock gives (``footnav.app.stream.at_clock_rate``; ``on_rate(clock rate, rate asked for)`` when they
     differ); ``fuse_imus``: a ``RawImuMode`` stream's IMUs averaged into one IMU for a single-IMU
-    navigator (``footnav.app.stream.fused_imus``). Closes the unit."""
+    navigator (``footnav.app.stream.fused_imus``); ``on_stepwise_only(reason)``: the firmware offers
+    stepwise output only (2014 MIMU22BT): start that instead, with the navigator this returns (for
+    ``footnav.device.onboard.OnboardStepNavigator``), rather than fail. Closes the unit."""
     result = result if result is not None else SerialSessionResult()
     name = unit.link.name
 
@@ -299,6 +339,8 @@ async def run_unit_session(
             return  # the link reports its own gaps (stall, disconnect, reconnect)
         log.warning("no data from %s for %.1f s", name, seconds)
 
+    if isinstance(status, FootStatus):
+        status.clock_rate_hz = lambda: result.clock_rate_hz
     if status is not None:
         status.lost_packets = lambda: unit.stats.lost_packets
     if link is not None:
@@ -310,10 +352,7 @@ async def run_unit_session(
         if start and calibration is not None:
             stored = await _unit_calibration(unit, calibration)
         if start:
-            if mode is None:
-                await unit.start_imu_stream(rate_divider_log2)
-            else:
-                await unit.start(mode)
+            mode, navigator = await _start(unit, mode, rate_divider_log2, navigator, on_stepwise_only)
             if extensions:
                 await unit.enable_extensions(tof=True, baro=True)
         samples = session_samples(
@@ -327,12 +366,13 @@ async def run_unit_session(
             window,
             on_window,
             use_ranges,
-            raw=isinstance(mode, RawImuMode),
+            output=output_of(mode),
             join_samples=join_samples,
         )
         if fuse_imus:
             samples = fused_imus(samples)
-        samples = at_clock_rate(samples, navigator, result, on_rate)
+        if not isinstance(mode, StepwiseMode):  # steps carry no device clock
+            samples = at_clock_rate(samples, navigator, result, on_rate)
         if stored is not None and mode is None:
             samples = corrected(samples, stored.calibration)
         await run_pipeline(samples, navigator, [*sinks, keep_last])

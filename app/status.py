@@ -32,6 +32,8 @@ class FootStatus:
         """Where the link's lost-packet count comes from, once a link exists."""
         self.reconnects: Callable[[], int] | None = None
         """Where the link's reconnect count comes from, if the link reconnects."""
+        self.clock_rate_hz: Callable[[], float | None] | None = None
+        """Where the sample rate by the unit's clock comes from, once the session measures it."""
 
     def __call__(self, nav: NavBatch) -> None:
         pos = nav.pos_n_m
@@ -61,8 +63,10 @@ class FootStatus:
         if self.reconnects is not None and (n := self.reconnects()):
             extra = f" reconnects {n}"
         name = f"{self.name}: " if with_name else ""
+        clock = None if self.clock_rate_hz is None else self.clock_rate_hz()
+        clock_text = "" if clock is None else f"clock {clock:g} Hz, "
         return (
-            f"{name}{self.rate_hz():5.0f}/s lost {lost}{extra} "
+            f"{name}{clock_text}{self.rate_hz():5.0f}/s lost {lost}{extra} "
             f"{'stance' if self.stance else 'swing '} {self.distance_m:7.2f} m"
         )
 

@@ -16,7 +16,9 @@ import numpy as np
 from footnav.device.links import reconnecting as links
 from footnav.device.protocol.extensions import BaroBatch, TofBatch
 from footnav.device.protocol.imu import clock_rate_hz
+from footnav.device.protocol.ins_states import InsStateBatch
 from footnav.device.protocol.raw_imu import RawImuBatch
+from footnav.device.protocol.stepwise import StepBatch
 from footnav.device.unit import LinkStats, OpenShoeUnit
 from footnav.pipeline.aiding.baro import PressureBatch
 from footnav.pipeline.aiding.tof_types import RangeBatch
@@ -48,11 +50,15 @@ class SerialSessionResult:
     """The sample rate by the unit's clock (``footnav.device.protocol.imu.clock_rate_hz``), Hz."""
 
 
-async def _raw_batches(unit: OpenShoeUnit) -> AsyncGenerator[RawImuBatch, None]:
-    """Only the :class:`RawImuBatch` es of the unit's stream."""
+OUTPUT_BATCHES: dict[str, type] = {"raw": RawImuBatch, "ins": InsStateBatch, "steps": StepBatch}
+"""The batch type a session passes on for each unit output other than the calibrated IMU's."""
+
+
+async def _batches_of(unit: OpenShoeUnit, kind: type) -> AsyncGenerator[Any, None]:
+    """Only the ``kind`` batches of the unit's stream."""
     async with contextlib.aclosing(unit.batches()) as stream:
         async for batch in stream:
-            if isinstance(batch, RawImuBatch):
+            if isinstance(batch, kind):
                 yield batch
 
 
@@ -80,7 +86,7 @@ class _Window:
         """Whether a batch starting at ``t_first_s`` (session s) lies after the window's end."""
         return self.bounds is not None and t_first_s > self.bounds[1]
 
-    def trim(self, batch: ImuBatch) -> ImuBatch | None:
+    def trim(self, batch: Any) -> Any:
         """``batch`` (session time) trimmed to the window to the sample, whatever the batching (None:
         none of it in the window)."""
         if self.bounds is None:
@@ -136,15 +142,16 @@ async def _arrivals(
                 await pending
 
 
-def _on_session_clock(
-    batch: ImuBatch, result: SerialSessionResult, host_clock: Callable[[int], int] | None
-) -> ImuBatch:
-    """An IMU batch with its time rebased to the session's first sample (which the first batch sets),
-    and its host stamps mapped by ``host_clock`` (per read: a joined batch holds several)."""
+def _on_session_clock(batch: Any, result: SerialSessionResult, host_clock: Callable[[int], int] | None) -> Any:
+    """A batch of samples (IMU, raw IMU, INS states) with its time rebased to the session's first
+    sample (which the first batch sets), and its host stamps mapped by ``host_clock`` (per read: a
+    joined batch holds several); a stepwise batch, which has no device time, only mapped."""
     if host_clock is not None:
         stamps, read_of = np.unique(batch.host_ns, return_inverse=True)
         mapped = np.array([host_clock(int(h)) for h in stamps], dtype=np.int64)
         batch = dataclasses.replace(batch, host_ns=mapped[read_of])
+    if isinstance(batch, StepBatch):
+        return batch
     if result.device_t0_s is None:
         result.device_t0_s = float(batch.t_s[0])
         result.first_counter = int(batch.counter[0])
@@ -162,22 +169,28 @@ async def session_samples(
     window: tuple[float, float] | None = None,
     on_window: Callable[[], None] | None = None,
     use_ranges: bool = True,
-    raw: bool = False,
+    output: str = "imu",
     join_samples: int = 0,
 ) -> AsyncIterator[Any]:
-    """The unit's IMU batches (and ToF and barometer readings, when the unit sends them; or, with
-    ``raw``, the ``RawImuBatch`` es of the multi-IMU output 0x28 of e.g. the dual-IMU board) with time
-    rebased to the session's first sample; ends after ``expect_samples`` IMU samples or when
-    ``source_done()`` and the link has gone quiet.
+    """The unit's IMU batches (and ToF and barometer readings, when the unit sends them), or the
+    batches of another ``output`` (a key of :data:`OUTPUT_BATCHES`: the raw multi-IMU output 0x28 of
+    e.g. the dual-IMU board, the unit's INS states, its stepwise dead reckoning), with time rebased to
+    the session's first sample; ends after ``expect_samples`` samples (packets of the other outputs)
+    or when ``source_done()`` and the link has gone quiet.
 
     ``host_clock`` maps the driver's host stamp of a batch to another (a replay's captured time).
     ``window = (start, end)`` in session seconds: samples outside it are decoded but not
     passed on (``on_window()`` is called at the first one passed on), the stream ends after ``end``.
     Readings before the first IMU sample (no session clock yet) are dropped; ToF readings are dropped
-    when not ``use_ranges``."""
+    when not ``use_ranges``. A window needs device time: not for the stepwise output."""
+    if window is not None and output == "steps":
+        raise ValueError("the stepwise output has no device time to window")
     span = _Window(window, on_window)
     received = 0
-    batches = cast(AsyncGenerator[Any, None], _raw_batches(unit) if raw else _imu_and_readings(unit, join_samples))
+    batches = cast(
+        AsyncGenerator[Any, None],
+        _imu_and_readings(unit, join_samples) if output == "imu" else _batches_of(unit, OUTPUT_BATCHES[output]),
+    )
     arrivals = _arrivals(batches, idle_notice_s, source_done, on_idle)
     async with contextlib.aclosing(batches), contextlib.aclosing(arrivals):
         while expect_samples is None or received < expect_samples:
@@ -194,6 +207,11 @@ async def session_samples(
                         yield item
                 continue
             batch = _on_session_clock(batch, result, host_clock)
+            if isinstance(batch, StepBatch):
+                received += len(batch)
+                result.samples_received = received
+                yield batch
+                continue
             if span.ended(float(batch.t_s[0])):
                 return
             batch = span.trim(batch)
@@ -230,7 +248,7 @@ async def at_clock_rate(
             yield item
             continue
         held.append(item)
-        if not isinstance(item, ImuBatch | RawImuBatch):
+        if not isinstance(item, ImuBatch | RawImuBatch | InsStateBatch):
             continue
         times.append(item.t_s)
         t_s = np.concatenate(times)

@@ -13,6 +13,7 @@ if TYPE_CHECKING:
     from .discovery import scan as scan
     from .errors import DeviceError as DeviceError
     from .errors import ProtocolError as ProtocolError
+    from .errors import UnsupportedModeError as UnsupportedModeError
     from .modes import InsMode as InsMode
     from .modes import Mode as Mode
     from .modes import NormalImuMode as NormalImuMode

@@ -11,3 +11,7 @@ class DeviceError(FootnavError):
 
 class ProtocolError(FootnavError):
     """Bytes that do not fit the unit's protocol where the session cannot go on without them."""
+
+
+class UnsupportedModeError(DeviceError):
+    """The unit's firmware lacks the output mode asked for (2014 MIMU22BT firmware: stepwise only)."""

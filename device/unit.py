@@ -39,7 +39,7 @@ from types import TracebackType
 from typing import Final, Self
 
 import numpy as np
-from footnav.device.errors import DeviceError, ProtocolError
+from footnav.device.errors import DeviceError, ProtocolError, UnsupportedModeError
 from footnav.device.links.base import ByteLink, CaptureTap
 from footnav.device.modes import InsMode, Mode, NormalImuMode, RawImuMode, StepwiseMode
 from footnav.device.protocol import commands as p
@@ -237,6 +237,8 @@ class OpenShoeUnit:
                 old = p.Commands2014()
                 # Only now, with 2015 firmware ruled out, may a 2014 command that 2015 would misparse go out.
                 fallback = old.stepwise_dead_reckoning() if isinstance(mode, StepwiseMode) else old.processing_off()
+                if pad := first.other_set_awaits:  # complete (as a bad frame) what the probe left there
+                    await self._write(bytes(pad))
                 if not await self._probe(fallback, probe_s, ruled_out=p.CommandSet.V2015):
                     raise DeviceError(
                         f"no answer from {self.link.name} to the start command within {probe_s:.1f} s "
@@ -248,7 +250,7 @@ class OpenShoeUnit:
         assert commands is not None
         if isinstance(commands, p.Commands2014):
             if not isinstance(mode, StepwiseMode):
-                raise DeviceError(
+                raise UnsupportedModeError(
                     f"the unit on {self.link.name} runs 2014 (MIMU22BT) firmware: footnav supports only "
                     "stepwise dead reckoning on it; update the firmware for IMU or INS output"
                 )

@@ -169,6 +169,7 @@ def test_the_experiments_table_names_every_experiment_module() -> None:
         (choices.AXIS_ERRORS, "footnav.device.emulator.sensors.imu_errors", "AXIS_ERRORS"),
         (choices.PROFILES, "footnav.pipeline.navigation.profiles", "PROFILES"),
         (choices.RECORDING_FORMATS, "footnav.device.files.recordings", "LOADERS"),
+        (choices.UNIT_MODELS, "footnav.device.models", "UNIT_MODELS"),
     ],
 )
 def test_the_parsers_choices_are_the_tables_keys(names: tuple[str, ...], module: str, table: str) -> None:

@@ -153,7 +153,7 @@ def build_blueprint(
             for run in dual_runs
         ],
         rrb.Tabs(
-            series("Link: samples/s", "rate", windowed=False),
+            series("Link: samples/s received, rate by the unit's clock", "rate", windowed=False),
             series("Link: lost packets, reconnects", "link_errors", windowed=False),
             rrb.StateTimelineView(name="Gait", origin=f"/{GAIT}"),
             rrb.TextLogView(name="Events", origin=f"/{EVENTS}"),
@@ -198,7 +198,14 @@ def static_setup(feet: Sequence[str] = ("foot",)) -> list[tuple[str, rr.AsCompon
             (p.step_cov, rr.Ellipsoids3D.from_fields(colors=[(*rgb, 70)], fill_mode="solid")),
             (p.speed, rr.SeriesLines(names=f"{foot} speed", colors=[rgb], widths=1.5)),
             (p.heading, rr.SeriesLines(names=f"{foot} heading", colors=[rgb], widths=1.5)),
-            (p.rate, rr.SeriesLines(names=f"{foot} samples/s", colors=[rgb], widths=1.5)),
+            (
+                p.rate,
+                rr.SeriesLines(
+                    names=[f"{foot} samples/s received", f"{foot} Hz by the unit's clock"],
+                    colors=[rgb, (*_darker(rgb),)],
+                    widths=[1.5, 1.5],
+                ),
+            ),
             (
                 p.link_errors,
                 rr.SeriesLines(

@@ -16,6 +16,7 @@ instead of dropping. The estimator and the capture never depend on this queue.
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import threading
 import time
@@ -108,6 +109,7 @@ class _Link:
     rate_hz: float
     lost_packets: int
     reconnects: int
+    clock_rate_hz: float
 
 
 @dataclass(slots=True)
@@ -309,14 +311,21 @@ class RerunLogger:
             self._queue.put(_SwingRest(foot, series))
 
     def log_link(
-        self, *, foot: str = DEFAULT_FOOT, t_s: float, rate_hz: float, lost_packets: int, reconnects: int = 0
+        self,
+        *,
+        foot: str = DEFAULT_FOOT,
+        t_s: float,
+        rate_hz: float,
+        lost_packets: int,
+        reconnects: int = 0,
+        clock_rate_hz: float = math.nan,
     ) -> None:
-        """Log link health at device time ``t_s``: sample rate (Hz of host time), cumulative lost
-        packets and reconnects. Never blocks."""
+        """Log link health at device time ``t_s``: samples received per second of host time, the rate by
+        the unit's clock (NaN: not measured yet), cumulative lost packets and reconnects. Never blocks."""
         if foot not in self._paths:
             raise ValueError(f"foot {foot!r} was not declared; this logger has feet={self.feet}")
         if not self._closed:
-            self._queue.put(_Link(foot, t_s, rate_hz, lost_packets, reconnects))
+            self._queue.put(_Link(foot, t_s, rate_hz, lost_packets, reconnects, clock_rate_hz))
 
     @property
     def steps(self) -> dict[str, int]:
@@ -509,9 +518,8 @@ class RerunLogger:
         for foot, items in by_foot.items():
             paths = self._paths[foot]
             index = convert.time_column(np.array([i.t_s for i in items], dtype=np.float64))
-            self.recording.send_columns(
-                paths.rate, indexes=[index], columns=rr.Scalars.columns(scalars=[i.rate_hz for i in items])
-            )
+            rates = np.array([[i.rate_hz, i.clock_rate_hz] for i in items], dtype=np.float64)
+            self.recording.send_columns(paths.rate, indexes=[index], columns=rr.Scalars.columns(scalars=rates))
             errors = np.array([[i.lost_packets, i.reconnects] for i in items], dtype=np.float64)
             self.recording.send_columns(paths.link_errors, indexes=[index], columns=rr.Scalars.columns(scalars=errors))
 

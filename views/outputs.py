@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import rerun as rr
@@ -152,11 +153,10 @@ class SessionViews:
         for out in self.live:
             out.logger.log_dual(view, run=run)
 
-    def log_link(
-        self, *, foot: str = DEFAULT_FOOT, t_s: float, rate_hz: float, lost_packets: int, reconnects: int = 0
-    ) -> None:
+    def log_link(self, **health: Any) -> None:
+        """Link health on every live output (``RerunLogger.log_link``'s keywords)."""
         for out in self.live:
-            out.logger.log_link(foot=foot, t_s=t_s, rate_hz=rate_hz, lost_packets=lost_packets, reconnects=reconnects)
+            out.logger.log_link(**health)
 
     def close(self) -> list[str]:
         """Close every live output (file footers written); returns notes on what did not close cleanly."""

@@ -24,7 +24,8 @@ from typing import TYPE_CHECKING
 from footnav.app import heap
 from footnav.app.config import DEFAULT, Config
 from footnav.app.feet import (
-    BASE_RATE_HZ,
+    ONBOARD_INS_STATES,
+    ONBOARD_TITLES,
     FootRun,
     attach_unit,
     calibration_lookup,
@@ -43,13 +44,15 @@ from footnav.app.feet import (
 )
 from footnav.app.session import UnitAddress, run_device_session
 from footnav.app.status import StatusLine
-from footnav.device.modes import RawImuMode
-from footnav.device.protocol.commands import MAX_RATE_DIVIDER_LOG2, MAX_RAW_RATE_DIVIDER_LOG2
+from footnav.device.files.capture import CaptureWriter
+from footnav.device.models import DEFAULT_MODEL, UnitModel, unit_model
+from footnav.device.modes import InsMode, Mode, RawImuMode, StepwiseMode
+from footnav.device.onboard import OnboardInsNavigator, OnboardStepNavigator
 from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
 from footnav.pipeline.dual_imu.navigator import DualNavigator
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.runner import NavSink
-from footnav.views.outputs import open_session_views
+from footnav.views.outputs import SessionViews, open_session_views
 
 if TYPE_CHECKING:
     from footnav.device.links.ble import BleBackend
@@ -59,13 +62,22 @@ BLE_RATE_DIVIDER = 2
 carries (about 16 kB/s at ATT MTU 23 and 6 notifications per 7.5 ms connection event)."""
 
 
-def rate_divider_for(address: UnitAddress, config: Config) -> int:
-    """The unit's rate divider: the configured one, except over BLE where the default is
-    :data:`BLE_RATE_DIVIDER` (250 Hz); asking for 1 kHz over BLE is allowed, with a warning."""
+INS_RATE_DIVIDER = {"serial": 2, "ble": 5}
+"""The default rate divider of the unit's INS states (230-byte packets with the covariance): 250 Hz
+over USB, 31.25 Hz (7 kB/s) over BLE, on a 1 kHz unit."""
+
+
+def rate_divider_for(address: UnitAddress, config: Config, output: str = "imu") -> int:
+    """The unit's rate divider: the configured one, except by default over BLE (:data:`BLE_RATE_DIVIDER`,
+    250 Hz) and for the INS states (:data:`INS_RATE_DIVIDER`); asking for 1 kHz over BLE is allowed,
+    with a warning."""
     k = int(config["unit.rate_divider"])
+    default = config.source("unit.rate_divider") == DEFAULT
+    if output == "ins" and default:
+        return INS_RATE_DIVIDER[address.transport]
     if address.transport != "ble":
         return k
-    if config.source("unit.rate_divider") == DEFAULT:
+    if default:
         return BLE_RATE_DIVIDER
     if k == 0:
         notice(
@@ -116,6 +128,68 @@ class LiveOptions:
     stance: str = "inertial"
     dual_imu_lever_b_m: tuple[float, float, float] | None = None
     fused_imu_mask: int | None = None
+    output: str = "auto"
+    model: str | None = None
+
+
+def choose_output(opts: LiveOptions, model: UnitModel) -> str:
+    """The output to stream (``footnav.device.models.OUTPUTS``) for what was asked, checked against
+    the model and the other options.
+
+    Raises
+    ------
+    FootnavError
+        the model lacks the output, or the options contradict each other.
+    """
+    dual, fused = opts.dual_imu_lever_b_m, opts.fused_imu_mask
+    if dual is not None and opts.tof:
+        raise FootnavError("a unit is either a dual-IMU board or a ToF unit: give --dual-imu or --tof, not both")
+    if fused is not None and (dual is not None or opts.tof):
+        raise FootnavError("--mode raw streams the raw IMUs of a unit without ToF; drop --dual-imu and --tof")
+    output = opts.output
+    if output == "auto":
+        output = "raw" if fused is not None or dual is not None else model.default_output
+    if output not in model.outputs:
+        raise FootnavError(
+            f"the {model.title} streams {', '.join(model.outputs)}, not --mode {output}"
+            + (" (--dual-imu streams the raw output)" if dual is not None else "")
+        )
+    if output in ONBOARD_TITLES and (dual is not None or opts.tof):
+        raise FootnavError(f"--mode {output} shows the unit's own solution: drop --dual-imu and --tof")
+    if dual is not None and output != "raw":
+        raise FootnavError("--dual-imu streams both IMUs' raw output: drop --mode or give --mode raw")
+    return output
+
+
+def unit_mode(output: str, rate_divider_log2: int, imu_mask: int) -> Mode | None:
+    """What to start on the unit for ``output`` (None: the calibrated IMU output 0x40)."""
+    if output == "raw":
+        return RawImuMode(imu_mask=imu_mask, rate_divider_log2=rate_divider_log2)
+    if output == "ins":
+        return InsMode(state_ids=ONBOARD_INS_STATES, rate_divider_log2=rate_divider_log2)
+    if output == "steps":
+        return StepwiseMode()
+    return None
+
+
+def stepwise_fallback(
+    run: FootRun, views: SessionViews | None, capture: CaptureWriter | None, *, two_feet: bool
+) -> Callable[[str], OnboardStepNavigator]:
+    """What a foot does when its unit's firmware offers stepwise output only: say so (terminal,
+    recording, capture event, which a replay follows) and show the unit's stepwise dead reckoning."""
+
+    def fall_back(reason: str) -> OnboardStepNavigator:
+        text = (f"{run.foot}: " if two_feet else "") + f"{reason}; showing the unit's stepwise dead reckoning"
+        notice(text)
+        if views is not None:
+            views.log_event(text, level="WARN")
+        if capture is not None:
+            capture.event(run.foot, "mode", mode="steps")
+        navigator = OnboardStepNavigator()
+        run.navigator = navigator
+        return navigator
+
+    return fall_back
 
 
 def run_live(opts: LiveOptions) -> int:
@@ -130,31 +204,28 @@ def run_live(opts: LiveOptions) -> int:
         return asyncio.run(live_session(opts))
     except KeyboardInterrupt:
         print("stopped: the unit was told to stop and the recording was closed", file=sys.stderr)
-    return 0
+        return 130  # the shell's code for a command ended by Ctrl-C (SIGINT)
 
 
 async def live_session(opts: LiveOptions) -> int:
     """:func:`run_live` on the running event loop (cancel it to stop, as Ctrl-C does)."""
     cfg = opts.config
+    model = DEFAULT_MODEL if opts.model is None else unit_model(opts.model)
+    output = choose_output(opts, model)
     rate_divider = int(cfg["unit.rate_divider"])
-    raw_output = opts.dual_imu_lever_b_m is not None or opts.fused_imu_mask is not None
-    top = MAX_RAW_RATE_DIVIDER_LOG2 if raw_output else MAX_RATE_DIVIDER_LOG2
+    top = model.max_rate_divider(output)
     if not 0 <= rate_divider <= top:
-        what = "the raw output 0x28" if raw_output else "the calibrated IMU output"
+        what = "the raw output 0x28" if output == "raw" else "the unit's outputs"
         raise FootnavError(
             f"rate divider must be 0..{top} for {what}, got {rate_divider} ({cfg.source('unit.rate_divider')})"
         )
     addresses = {foot: UnitAddress.parse(text) for foot, text in opts.ports.items()}
-    dividers = {foot: rate_divider_for(address, cfg) for foot, address in addresses.items()}
+    dividers = {foot: rate_divider_for(address, cfg, output) for foot, address in addresses.items()}
     feet = tuple(opts.ports)
     two_feet = len(feet) > 1
     session_id = new_session_id("live")
-    dual = opts.dual_imu_lever_b_m
-    if dual is not None and opts.tof:
-        raise FootnavError("a unit is either a dual-IMU board or a ToF unit: give --dual-imu or --tof, not both")
-    fused = opts.fused_imu_mask
-    if fused is not None and (dual is not None or opts.tof):
-        raise FootnavError("--mode raw streams the raw IMUs of a unit without ToF; drop --dual-imu and --tof")
+    dual, fused = opts.dual_imu_lever_b_m, opts.fused_imu_mask
+    onboard = output if output in ONBOARD_TITLES else None
     heap.limit_arenas()  # before the viewer's and the capture's threads start
     views, notes = open_session_views(
         save=opts.save,
@@ -178,10 +249,11 @@ async def live_session(opts: LiveOptions) -> int:
             foot,
             str(addresses[foot]),
             nav_config,
-            BASE_RATE_HZ / 2 ** dividers[foot],
+            model.rate_hz(dividers[foot]),
             tof=tof,
             dual_lever_b_m=dual,
             rate_divider_log2=dividers[foot],
+            onboard=onboard,
         )
         for foot in feet
     ]
@@ -192,24 +264,24 @@ async def live_session(opts: LiveOptions) -> int:
         if opts.collect is not None:
             run.sinks.append(opts.collect(run.foot))
         if capture is not None:
-            transport = addresses[run.foot].transport
             run.tap = capture.add_unit(
                 unit_header(
                     run.foot,
                     run.port,
-                    transport,
+                    addresses[run.foot].transport,
                     cfg,
                     run.rate_divider_log2,
                     extensions=opts.tof,
                     stance=opts.stance,
                     dual_imu_lever_b_m=dual,
                     fused_imu_mask=fused,
+                    onboard=onboard,
+                    model=model,
                 )
             )
+    probing = opts.output == "auto" and opts.model is None  # 2014 firmware: its stepwise output instead
 
     async def session(run: FootRun) -> None:
-        mask = fused if fused is not None else DUAL_IMU_MASK
-        raw = RawImuMode(imu_mask=mask, rate_divider_log2=run.rate_divider_log2)
         await run_device_session(
             addresses[run.foot],
             run.navigator,
@@ -221,20 +293,18 @@ async def live_session(opts: LiveOptions) -> int:
             on_open=lambda unit: attach_unit(run, unit),
             on_link_event=link_reporter(run, views, capture, two_feet=two_feet),
             ble_backend=opts.ble_backend,
-            calibration=None
-            if dual is not None or fused is not None
-            else calibration_lookup(cfg, run.foot, capture, views, two_feet=two_feet),
+            calibration=calibration_lookup(cfg, run.foot, capture, views, two_feet=two_feet)
+            if output == "imu"
+            else None,
             extensions=opts.tof,
-            mode=raw if dual is not None or fused is not None else None,
+            mode=unit_mode(output, run.rate_divider_log2, DUAL_IMU_MASK if fused is None else fused),
             fuse_imus=fused is not None,
             on_rate=rate_reporter(run, views, two_feet=two_feet),
+            on_stepwise_only=stepwise_fallback(run, views, capture, two_feet=two_feet) if probing else None,
         )
 
     if views is not None:
-        views.log_event(
-            f"live session {session_id}: "
-            + ", ".join(f"{f} on {addresses[f].description} at {BASE_RATE_HZ / 2 ** dividers[f]:g} Hz" for f in feet)
-        )
+        views.log_event(f"live session {session_id}: " + ", ".join(_foot_line(run, addresses, model) for run in runs))
     try:
         await run_feet(runs, session)
     finally:
@@ -247,3 +317,12 @@ async def live_session(opts: LiveOptions) -> int:
             if run.result.samples_received:
                 print((f"{run.foot}: " if two_feet else "") + link_summary(run))
     return 0
+
+
+def _foot_line(run: FootRun, addresses: dict[str, UnitAddress], model: UnitModel) -> str:
+    """A foot's unit, where it is and what it streams, for the session's first event."""
+    where = f"{run.foot} on {addresses[run.foot].description}"
+    if isinstance(run.navigator, OnboardStepNavigator):
+        return f"{where}: the unit's stepwise dead reckoning"
+    what = "the unit's INS states at" if isinstance(run.navigator, OnboardInsNavigator) else "at"
+    return f"{where}: {what} {model.rate_hz(run.rate_divider_log2):g} Hz asked"

@@ -19,10 +19,20 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from footnav.app.calibration_store import StoredCalibration, calibration_dir, load_calibration
 from footnav.app.config import Config, apply_capture_settings
-from footnav.app.feet import FootRun, dual_view_sink, foot_run, foot_sinks, notice, rate_reporter
+from footnav.app.feet import (
+    ONBOARD_INS_STATES,
+    ONBOARD_TITLES,
+    FootRun,
+    dual_view_sink,
+    foot_run,
+    foot_sinks,
+    notice,
+    rate_reporter,
+)
 from footnav.app.session import CalibrationLookup, run_unit_session
 from footnav.app.status import Progress, StatusLine, input_handling
 from footnav.device.files.capture import (
@@ -32,11 +42,11 @@ from footnav.device.files.capture import (
     summarize_capture,
 )
 from footnav.device.links.replay import CaptureReplayLink
-from footnav.device.modes import RawImuMode
+from footnav.device.modes import InsMode, Mode, RawImuMode, StepwiseMode
 from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
 from footnav.device.unit import OpenShoeUnit
 from footnav.pipeline.dual_imu.navigator import DualNavigator
-from footnav.pipeline.errors import InputFormatError
+from footnav.pipeline.errors import FootnavError, InputFormatError
 from footnav.pipeline.runner import NavSink
 from footnav.views.outputs import open_session_views
 
@@ -141,6 +151,41 @@ def checked_summary(opts: ReplayOptions) -> CaptureSummary:
     return summary
 
 
+def onboard_outputs(summary: CaptureSummary, *, windowed: bool = False) -> dict[str, str]:
+    """foot -> "ins" or "steps" for the feet whose capture holds the unit's own solution: by its
+    header, or by a ``mode`` event (a unit whose firmware offered stepwise output only).
+
+    Raises
+    ------
+    FootnavError
+        ``windowed``, and a foot's capture is stepwise output (no device clock to window).
+    """
+    out = {u.foot: str(u.settings["mode"]) for u in summary.info.units if u.settings.get("mode") in ONBOARD_TITLES}
+    for foot, events in summary.events.items():
+        for event in events:
+            if event.get("event") == "mode" and event.get("mode") in ONBOARD_TITLES:
+                out[foot] = str(event["mode"])
+    if windowed and "steps" in out.values():
+        raise FootnavError("--start/--end need the unit's clock: a capture of stepwise output has none")
+    return out
+
+
+def captured_mode(settings: dict[str, Any], onboard: str | None, *, dual: bool) -> Mode | None:
+    """The output mode a captured unit was started in, from its header's settings (None: the
+    calibrated IMU output)."""
+    rate_divider = int(settings.get("rate_divider_log2", 0))
+    if onboard == "ins":
+        states = settings.get("ins_state_ids", list(ONBOARD_INS_STATES))
+        return InsMode(state_ids=tuple(int(i) for i in states), rate_divider_log2=rate_divider)
+    if onboard == "steps":
+        return StepwiseMode()
+    fused_mask = settings.get("fused_imu_mask")
+    if dual or isinstance(fused_mask, int):
+        mask = int(fused_mask) if isinstance(fused_mask, int) else DUAL_IMU_MASK
+        return RawImuMode(imu_mask=mask, rate_divider_log2=rate_divider)
+    return None
+
+
 def capture_calibration_lookup(summary: CaptureSummary, cfg: Config, foot: str) -> CalibrationLookup | None:
     """The live session asked the unit its MCU id (an ``mcu_id`` event): ask again, from the capture."""
     if not any(e.get("event") == "mcu_id" for e in summary.events.get(foot, [])):
@@ -190,6 +235,7 @@ def run_replay(opts: ReplayOptions) -> int:
         for u in info.units
         if isinstance(u.settings.get("dual_imu_lever_b_m"), list)
     }
+    onboard_of = onboard_outputs(summary, windowed=windowed)
     views, notes = open_session_views(
         save=opts.save,
         want_viewer=opts.viewer,
@@ -219,6 +265,7 @@ def run_replay(opts: ReplayOptions) -> int:
             rate_hz,
             tof=cfg.tof_config(opts.stance or str(recorded)),
             dual_lever_b_m=None if lever is None else (lever[0], lever[1], lever[2]),
+            onboard=onboard_of.get(foot),
         )
         navigator = run.navigator
         foot_sinks(run, views, status, two_feet=len(feet) > 1, put_timeout_s=0.0 if realtime else REPLAY_PUT_TIMEOUT_S)
@@ -249,8 +296,7 @@ def run_replay(opts: ReplayOptions) -> int:
         settings = info.units[feet.index(run.foot)].settings
         rate_divider = int(settings.get("rate_divider_log2", 0))
         fused_mask = settings.get("fused_imu_mask")
-        mask = int(fused_mask) if isinstance(fused_mask, int) else DUAL_IMU_MASK
-        raw = run.foot in lever_of or isinstance(fused_mask, int)
+        onboard = onboard_of.get(run.foot)
         await run_unit_session(
             unit,
             run.navigator,
@@ -264,11 +310,11 @@ def run_replay(opts: ReplayOptions) -> int:
             idle_notice_s=None,
             window=(opts.start_s, opts.end_s) if windowed else None,
             on_window=lambda: setattr(link, "paced", True),
-            calibration=capture_calibration_lookup(summary, cfg, run.foot),
+            calibration=capture_calibration_lookup(summary, cfg, run.foot) if onboard is None else None,
             extensions=bool(settings.get("extensions", False)),
             use_ranges=opts.tof,
             join_samples=FULL_SPEED_JOIN_SAMPLES if math.isinf(opts.speed) else 0,
-            mode=RawImuMode(imu_mask=mask, rate_divider_log2=rate_divider) if raw else None,
+            mode=captured_mode(settings, onboard, dual=run.foot in lever_of),
             fuse_imus=isinstance(fused_mask, int),
             on_rate=rate_reporter(run, views, two_feet=len(feet) > 1),
         )
@@ -292,7 +338,7 @@ def run_replay(opts: ReplayOptions) -> int:
     if interrupted:
         print("interrupted: the recording was closed", file=sys.stderr)
     print_results(opts, summary, runs, links, status)
-    return 0
+    return 130 if interrupted else 0  # 130: the shell's code for Ctrl-C (SIGINT)
 
 
 def print_results(

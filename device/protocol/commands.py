@@ -339,6 +339,13 @@ class CommandParser:
             self._started_s = now_s
         return out
 
+    @property
+    def bytes_awaited(self) -> int:
+        """Bytes the buffered partial frame still needs (0: none buffered)."""
+        if not self._buf:
+            return 0
+        return 1 + self._table[self._buf[0]] + 2 - len(self._buf)
+
 
 # --- the 2014 MIMU22BT set and tagged builders for both sets -----------------------------------------
 
@@ -403,6 +410,15 @@ class OutgoingCommand:
         """``cmd_id | payload | chk_hi chk_lo``."""
         body = bytes((self.cmd_id,)) + self.payload
         return body + checksum16(body).to_bytes(2, "big")
+
+    @property
+    def other_set_awaits(self) -> int:
+        """Bytes the other set's parser still waits for after this frame: a payload byte that is one
+        of its IDs starts a frame there (``40 01 00 41`` is ACK ``01`` waiting for 2 more bytes on 2014
+        firmware), which would swallow the start of the next command unless padded."""
+        parser = CommandParser(CommandSet.V2014 if self.command_set is CommandSet.V2015 else CommandSet.V2015)
+        parser.feed(self.frame)
+        return parser.bytes_awaited
 
     @property
     def harmless_on_other_set(self) -> bool:

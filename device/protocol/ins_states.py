@@ -29,7 +29,7 @@ right is negative in footnav). The quaternion is read as body-to-nav, as nav_eq'
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 from footnav.device.protocol import commands as protocol
@@ -132,6 +132,23 @@ class InsStateBatch:
 
     def __len__(self) -> int:
         return int(self.counter.shape[0])
+
+    def select(self, keep: NDArray[np.bool_]) -> InsStateBatch:
+        """The samples where ``keep`` (n,) is True."""
+
+        def part(a: NDArray[Any] | None) -> Any:
+            return None if a is None else a[keep]
+
+        return InsStateBatch(
+            self.t_s[keep],
+            part(self.pos_n_m),
+            part(self.vel_n_mps),
+            part(self.quat_nb_wxyz),
+            part(self.cov_9x9),
+            part(self.interrupt_counter),
+            self.counter[keep],
+            self.host_ns[keep],
+        )
 
 
 @dataclass(frozen=True, slots=True)

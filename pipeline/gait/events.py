@@ -59,10 +59,11 @@ class GaitEventTracker:
         self._swing: SwingClearanceTracker | None = None
 
     def annotate(self, nav: NavBatch) -> NavBatch:
-        """``nav`` with ``step_onsets`` and, for ToF units, ``swing_clearance`` filled in."""
+        """``nav`` with ``step_onsets`` (unless it has them: a unit's stepwise output) and, for ToF units,
+        ``swing_clearance`` filled in."""
         if len(nav) == 0:
             return nav
-        onsets = step_onsets(nav.stance, self._last_stance)
+        onsets = nav.step_onsets if nav.step_onsets is not None else step_onsets(nav.stance, self._last_stance)
         self._last_stance = bool(nav.stance[-1])
         swing = None
         if self._swing is None and nav.floor_z_m is not None and self._snap_m is not None:
