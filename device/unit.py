@@ -41,6 +41,7 @@ from typing import Final, Self
 import numpy as np
 from footnav.device.errors import DeviceError, ProtocolError, UnsupportedModeError
 from footnav.device.links.base import ByteLink, CaptureTap
+from footnav.device.links.reconnecting import ReconnectingLink
 from footnav.device.modes import InsMode, Mode, NormalImuMode, RawImuMode, StepwiseMode
 from footnav.device.protocol import commands as p
 from footnav.device.protocol import extensions, ins_states, raw_imu, stepwise
@@ -505,6 +506,8 @@ class OpenShoeUnit:
         await self._write(cmd.frame)
         if await self._wait_for_ack(cmd.cmd_id, timeout_s):
             self._commands = p.commands_for(cmd.command_set)
+            if isinstance(self.link, ReconnectingLink):  # its resume sequence is in the unit's set
+                self.link.use_command_set(cmd.command_set)
             log.info("%s: firmware command set %s", self.link.name, cmd.command_set.value)
             await self._ack_data()
             return True

@@ -123,7 +123,7 @@ def test_ins_output_live_captured_and_replayed(walk: GaitTruth, tmp_path: Path) 
     np.testing.assert_array_equal(again.pos_n_m[:m], track.pos_n_m[:m])
 
 
-@pytest.mark.parametrize(("model", "k", "rate_hz"), [("openshoe", 0, 819.2), ("mimu4444", 3, 31.25)])
+@pytest.mark.parametrize(("model", "k", "rate_hz"), [("openshoe", 0, 819.2), ("mimu4444", 0, 250.0), ("mimu4444", 3, 31.25)])
 def test_units_at_other_base_rates_are_asked_and_navigated_at_their_rate(
     tmp_path: Path, model: str, k: int, rate_hz: float
 ) -> None:
@@ -162,3 +162,43 @@ async def test_what_a_unit_cannot_stream_is_refused_before_anything_opens(
     with pytest.raises(FootnavError, match=message):
         await live_session(live)
     assert not list(tmp_path.glob("*.mcap"))
+
+
+async def test_a_2014_unit_is_resumed_with_its_own_stepwise_start_after_a_replug(
+    walk: GaitTruth, tmp_path: Path
+) -> None:
+    """What the link re-sends after a reconnect is learned in the unit's command set: the 2014 SWDR
+    start (14 00 14), not the 2015 probes (40 .., 34 ..) that the 2014 parser would misread, and no
+    watchdog on the stepwise stream's pauses."""
+    import os
+
+    from footnav.device.links.reconnecting import ReconnectingLink
+    from footnav.device.modes import NormalImuMode, StepwiseMode
+    from footnav.device.protocol.commands import Commands2014
+    from footnav.device.protocol.stepwise import StepBatch
+    from footnav.device.unit import OpenShoeUnit
+
+    port = tmp_path / "ttyMIMU"
+    first = emulated_unit("mimu22bt", walk, walk.acc_b_mps2, walk.gyr_b_radps, speed=math.inf)
+    second = emulated_unit("mimu22bt", walk, walk.acc_b_mps2, walk.gyr_b_radps, speed=math.inf)
+    with first, second:
+        os.symlink(first.port, port)
+        link = ReconnectingLink.serial(str(port))
+        await link.open()
+        unit = OpenShoeUnit(link)
+        with pytest.raises(FootnavError, match="2014"):
+            await unit.start(NormalImuMode())
+        await unit.start(StepwiseMode())
+        assert link.resume_bytes == Commands2014().stepwise_dead_reckoning().frame
+        first.unplug()
+        os.replace(port, tmp_path / "gone")
+        os.symlink(second.port, port)
+        got = 0
+        async with asyncio.timeout(30):
+            async for batch in unit.batches():
+                got += len(batch) if isinstance(batch, StepBatch) else 0
+                if got >= 3 and second.commands:
+                    break
+        await unit.close()
+    assert [c.cmd_id for c in second.commands if c.cmd_id != 0x01][:1] == [0x14]
+    assert link.health.reconnects == 1 and link.health.stalls == 0

@@ -74,6 +74,7 @@ _CONTINUOUS_STARTS: Final = frozenset(
 )
 """Commands that start output at a fixed rate (their last payload byte is the mode byte)."""
 _STOPS: Final = frozenset({protocol.CMD_ALL_PROC_OFF, protocol.CMD_OUTPUT_ALL_OFF})
+_STOPS_2014: Final = frozenset({protocol.CMD_2014_PROCESSING_OFF, protocol.CMD_2014_OUTPUT_ALL_OFF})
 
 Connector = Callable[[], Awaitable["ByteLink"]]
 """Opens a fresh inner link (raising ``DeviceError`` when the unit is not there)."""
@@ -220,6 +221,8 @@ class ReconnectingLink:
         self._reconnect_task: asyncio.Task[None] | None = None
         self._watchdog_task: asyncio.Task[None] | None = None
         self._parser = protocol.CommandParser()
+        self._command_set = protocol.CommandSet.V2015
+        self._stops, self._swdr = _STOPS, protocol.CMD_STEPWISE_DEAD_RECKONING
         self._desired: dict[tuple[int, int], bytes] = {}
         self._explicit_resume: bytes | None = None
         self._continuous = False
@@ -406,19 +409,34 @@ class ReconnectingLink:
         if self._on_event is not None:
             self._on_event(event)
 
+    def use_command_set(self, command_set: protocol.CommandSet) -> None:
+        """Read what the host sends as ``command_set`` from now on (the driver has probed the unit's
+        firmware); on a change, what was learned from the probes of the other set is forgotten (2014
+        firmware has stepwise output only: no continuous stream, no watchdog)."""
+        if command_set is self._command_set:
+            return
+        self._command_set = command_set
+        self._parser = protocol.CommandParser(command_set)
+        v2014 = command_set is protocol.CommandSet.V2014
+        self._stops = _STOPS_2014 if v2014 else _STOPS
+        self._swdr = protocol.CMD_2014_STEPWISE_DEAD_RECKONING if v2014 else protocol.CMD_STEPWISE_DEAD_RECKONING
+        self._desired.clear()
+        self._continuous = False
+
     def _learn(self, data: bytes) -> bool:
         """Update the resume state from host -> device bytes; True if they held only state commands."""
         commands = self._parser.feed(data)
         only_state = bool(commands)
+        v2014 = self._command_set is protocol.CommandSet.V2014
         for cmd in commands:
             cid = cmd.cmd_id
-            if cid in _STOPS:
-                if self._continuous or any(k[0] not in _STOPS for k in self._desired):
+            if cid in self._stops:
+                if self._continuous or any(k[0] not in self._stops for k in self._desired):
                     self._desired.clear()
                 self._continuous = False
                 self._desired[(cid, 0)] = bytes(cmd)
-            elif cid in _CONTINUOUS_STARTS or cid == protocol.CMD_STEPWISE_DEAD_RECKONING:
-                for key in [k for k in self._desired if k[0] in _STOPS]:
+            elif (cid in _CONTINUOUS_STARTS and not v2014) or cid == self._swdr:
+                for key in [k for k in self._desired if k[0] in self._stops]:
                     del self._desired[key]
                 key = (cid, cmd.payload[0] if cid == protocol.CMD_OUTPUT_STATE else 0)
                 raw = cid == protocol.CMD_OUTPUT_IMU_RD

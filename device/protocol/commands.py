@@ -275,13 +275,14 @@ def data_packet(pkt_number: int, payload: bytes) -> bytes:
 
 @dataclass(frozen=True, slots=True)
 class Command:
-    """One host command as the device parsed it."""
+    """One host command as the device parsed it (by either set's table)."""
 
     cmd_id: int
     payload: bytes
 
     def __bytes__(self) -> bytes:
-        return command_frame(self.cmd_id, self.payload)
+        body = bytes((self.cmd_id,)) + self.payload
+        return body + checksum16(body).to_bytes(2, "big")
 
 
 class CommandParser:
