@@ -3,14 +3,20 @@
 Layout, sized for a laptop screen (1366×768 and up)::
 
     ┌──────────────────────────────┬──────────────────────────────┐
-    │                              │ Foot clearance [m]           │
-    │  3D: per foot the track      │ [Speed | Heading | Stance]   │
-    │  (trail up to the cursor +   │ [Detector | Position σ]      │
-    │  decimated line; the step-   │ [Link rate | Link errors |   │
-    │  smoothed track), pose, step │  Gait | Events]              │
-    │  markers with floor ellipses,│                              │
-    │  k-sigma ellipsoid, truth    │                              │
+    │ Plan view: the track from    │ Foot clearance [m]           │
+    │ above in metres, grid and    │ [Speed | Stance and swing |  │
+    │ scale, start/end, step       │  Heading (continuous)]       │
+    │ ellipses at k sigma, truth   │ [Detector (log10) | Pos. σ | │
+    ├──────────────────────────────┤  ToF readings | Altitude]    │
+    │ 3D: per foot the track       │ [Strides | Link rate |       │
+    │ (trail + decimated line),    │  Link errors | Events]       │
+    │ pose, steps with floor       │                              │
+    │ ellipses, k-sigma ellipsoid  │                              │
     └──────────────────────────────┴──────────────────────────────┘
+
+Panels appear only for what the session has (ToF panels for ToF units, a residual plot per
+dual-IMU board). Colours are chosen together for the dark theme and colour-vision deficiencies
+(Okabe-Ito palette): each foot its colour, stance yellow and swing grey, thresholds and markers light.
 
 The track is a per-sample Points3D entity drawn as a trail by a per-entity visible time range
 (−inf … cursor), so the growing track is never re-logged at sample rate; the decimated line is
@@ -30,14 +36,19 @@ from footnav.views.paths import (
     EVENTS,
     FLOOR,
     GAIT,
+    PLAN,
     PLOTS,
+    STRIDES,
     TIMELINE,
     TRUTH,
     WORLD,
     DualPaths,
     FootPaths,
+    PlanPaths,
 )
 
+MULTI_SERIES = frozenset({"detector", "pos_sigma", "rate", "link_errors", "tof_readings"})
+"""Plots with several series per foot: their legend is shown even for one foot."""
 PLOT_WINDOW_S = 10.0
 """Clearance, stance, speed and detector plots show this many seconds before the cursor."""
 
@@ -47,23 +58,29 @@ SHOE_HALF_SIZE_M = (0.13, 0.05, 0.035)
 """Half-size of the box drawn at the IMU pose (x forward along the shoe, z up in the body frame)."""
 AXES_LENGTH_M = 0.15
 STEP_RADIUS_M = 0.025
-LINE_RADIUS_M = 0.006
+LINE_RADIUS_M = 0.012
 FLOOR_HIT_RADIUS_M = 0.003
 
-SWING_RGB = (255, 140, 0)
-STANCE_RGB = (0, 160, 255)
-TRUTH_RGB = (150, 150, 150)
-SMOOTHED_RGB = (150, 70, 210)
+# Colours from the Okabe-Ito palette (distinguishable with the common colour-vision deficiencies),
+# chosen together for the dark theme: the feet carry identity; stance and swing are yellow and grey.
+SWING_RGB = (190, 190, 190)
+STANCE_RGB = (240, 228, 66)
+TRUTH_RGB = (245, 245, 245)
+SMOOTHED_RGB = (204, 121, 167)
 """The step-smoothed track and clearance (``footnav.pipeline.smoothing.stepwise``)."""
-TOF_RGB = ((0, 170, 120), (150, 90, 200), (200, 150, 0))
+TOF_RGB = ((204, 121, 167), (240, 228, 66), (86, 180, 233))
 """Colours of the three ToF sensors' measured heights (toe, mid-foot, heel)."""
-COV_RGBA = (255, 200, 0, 110)
+TOF_PLACES = ("toe", "mid-foot", "heel")
+"""Where the three ToF sensors sit on the shoe (the order of the ``[tof]`` configuration)."""
+MARKER_RGB = (235, 235, 235)
+COV_RGBA = (240, 228, 66, 170)
 FLOOR_RGBA = (110, 110, 110, 60)
+STEP_COV_ALPHA = 120
 
 FOOT_COLORS: dict[str, tuple[int, int, int]] = {
-    "foot": (0, 200, 120),
-    "left": (0, 160, 255),
-    "right": (230, 80, 60),
+    "foot": (0, 158, 115),
+    "left": (86, 180, 233),
+    "right": (213, 94, 0),
 }
 
 
@@ -93,7 +110,12 @@ def _window(seconds: float) -> rrb.VisibleTimeRange:
 
 
 def build_blueprint(
-    feet: Sequence[str] = ("foot",), *, plot_window_s: float = PLOT_WINDOW_S, dual_runs: Sequence[str] = ()
+    feet: Sequence[str] = ("foot",),
+    *,
+    plot_window_s: float = PLOT_WINDOW_S,
+    dual_runs: Sequence[str] = (),
+    tof: bool = False,
+    sigma_scale: float = 3.0,
 ) -> rrb.Blueprint:
     """The default blueprint for a session with the given feet.
 
@@ -106,9 +128,16 @@ def build_blueprint(
     dual_runs
         dual-IMU boards in the session (:class:`footnav.views.paths.DualPaths`): their IMU tracks are drawn as trails
         and their constraint residuals get a plot of their own.
+    tof
+        the session has ToF units: their readings' and the pressure altitude's panels are shown.
+    sigma_scale
+        the ellipses' size in standard deviations (stated in the plan view's title).
     """
     paths = [FootPaths(f) for f in feet]
-    overrides: dict[str, list[rrb.VisibleTimeRanges | rr.Points3D]] = {}
+    overrides: dict[str, list[rrb.VisibleTimeRanges | rr.Points3D | rr.Points2D]] = {}
+    for f in feet:
+        overrides[PlanPaths(f).steps] = [_trail(), rr.Points2D.from_fields(radii=-3.0, show_labels=False)]
+        overrides[PlanPaths(f).step_cov] = [_trail()]
     for p in paths:
         overrides[p.track] = [_trail(), rr.Points3D.from_fields(radii=TRACK_RADIUS_M, show_labels=False)]
         overrides[p.truth] = [_trail(), rr.Points3D.from_fields(radii=TRUTH_RADIUS_M, show_labels=False)]
@@ -120,31 +149,48 @@ def build_blueprint(
         for imu in ("imu1", "imu2"):
             overrides[DualPaths(run).imu(imu)] = [_trail(), rr.Points3D.from_fields(radii=TRACK_RADIUS_M)]
     scene = rrb.Spatial3DView(
-        name="Foot track",
+        name="Foot track (3D)",
         origin=f"/{WORLD}",
-        overrides=overrides,  # type: ignore[arg-type]  # dict is invariant; values are VisualizerLike
+        overrides={k: v for k, v in overrides.items() if k.startswith(WORLD)},
         # no tracking: the viewer frames the whole walk (following the pose put the camera on the shoe)
         eye_controls=rrb.EyeControls3D(eye_up=[0, 0, 1]),
+    )
+    plan = rrb.Spatial2DView(
+        name=f"Plan view [m], north up; step ellipses {sigma_scale:g}σ",
+        origin=f"/{PLAN}",
+        overrides={k: v for k, v in overrides.items() if k.startswith(PLAN)},
     )
     window = _window(plot_window_s)
 
     def series(name: str, quantity: str, *, windowed: bool = True, **kw: Any) -> rrb.TimeSeriesView:
+        legend = rrb.PlotLegend(rrb.Corner2D.LeftTop, visible=len(feet) > 1 or quantity in MULTI_SERIES)
         return rrb.TimeSeriesView(
-            name=name, origin=f"/{PLOTS}/{quantity}", time_ranges=window if windowed else None, **kw
+            name=name,
+            origin=f"/{PLOTS}/{quantity}",
+            time_ranges=window if windowed else None,
+            plot_legend=legend,
+            **kw,
         )
 
+    tof_panels = (
+        [
+            series("ToF readings (cumulative): used, gated, invalid", "tof_readings", windowed=False),
+            series("Pressure altitude [m]", "altitude", windowed=False),
+        ]
+        if tof
+        else []
+    )
     plots = rrb.Vertical(
         series("Foot clearance [m]", "clearance"),
         rrb.Tabs(
             series("Speed [m/s]", "speed"),
-            series("Heading [°]", "heading", windowed=False),
-            series("Stance", "stance", axis_y=rrb.ScalarAxis(range=(-0.1, 1.1), zoom_lock=True)),
+            rrb.StateTimelineView(name="Stance and swing", origin=f"/{GAIT}", time_ranges=window),
+            series("Heading [°], continuous", "heading", windowed=False),
         ),
         rrb.Tabs(
-            series("ZUPT detector (statistic, threshold)", "detector"),
+            series("ZUPT detector: log10 statistic, log10 threshold", "detector"),
             series("Position σ [m]", "pos_sigma", windowed=False),
-            series("ToF readings: used, gated, invalid", "tof_readings", windowed=False),
-            series("Pressure altitude [m]", "altitude", windowed=False),
+            *tof_panels,
         ),
         *[
             rrb.TimeSeriesView(
@@ -153,15 +199,15 @@ def build_blueprint(
             for run in dual_runs
         ],
         rrb.Tabs(
+            rrb.TextDocumentView(name="Strides", origin=f"/{STRIDES}"),
             series("Link: samples/s received, rate by the unit's clock", "rate", windowed=False),
             series("Link: lost packets, reconnects", "link_errors", windowed=False),
-            rrb.StateTimelineView(name="Gait", origin=f"/{GAIT}"),
             rrb.TextLogView(name="Events", origin=f"/{EVENTS}"),
         ),
-        row_shares=[3, 3, 3, *([2] * len(dual_runs)), 2],
+        row_shares=[3, 3, 3, *([2] * len(dual_runs)), 3],
     )
     return rrb.Blueprint(
-        rrb.Horizontal(scene, plots, column_shares=[3, 2]),
+        rrb.Horizontal(rrb.Vertical(plan, scene, row_shares=[1, 1]), plots, column_shares=[3, 2]),
         rrb.TimePanel(state="collapsed", timeline=TIMELINE, play_state="following"),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
@@ -182,20 +228,24 @@ def static_setup(feet: Sequence[str] = ("foot",)) -> list[tuple[str, rr.AsCompon
         (TRUTH, rr.AnnotationContext([(0, "truth", TRUTH_RGB)])),
     ]
     for foot in feet:
-        p = FootPaths(foot)
+        p, plan = FootPaths(foot), PlanPaths(foot)
         rgb = foot_color(foot)
         out += [
             (p.pose, rr.TransformAxes3D(AXES_LENGTH_M)),
             (p.shoe, rr.Boxes3D(half_sizes=[SHOE_HALF_SIZE_M], colors=[(*rgb, 140)], fill_mode="solid")),
             (
                 p.cov,
-                rr.Ellipsoids3D.from_fields(colors=[COV_RGBA], fill_mode="majorwireframe", line_radii=0.002),
+                rr.Ellipsoids3D.from_fields(colors=[COV_RGBA], fill_mode="majorwireframe", line_radii=0.004),
             ),
             (p.truth, rr.Points3D.from_fields(colors=[TRUTH_RGB])),
             (p.smoothed, rr.Points3D.from_fields(colors=[SMOOTHED_RGB])),
             (p.line, rr.LineStrips3D.from_fields(colors=[rgb], radii=LINE_RADIUS_M)),
             (p.steps, rr.Points3D.from_fields(colors=[rgb])),
-            (p.step_cov, rr.Ellipsoids3D.from_fields(colors=[(*rgb, 70)], fill_mode="solid")),
+            (p.step_cov, rr.Ellipsoids3D.from_fields(colors=[(*rgb, STEP_COV_ALPHA)], fill_mode="solid")),
+            (plan.line, rr.LineStrips2D.from_fields(colors=[rgb], radii=-1.5)),
+            (plan.steps, rr.Points2D.from_fields(colors=[rgb])),
+            (plan.step_cov, rr.LineStrips2D.from_fields(colors=[(*rgb, 200)], radii=-1.0)),
+            (plan.truth, rr.LineStrips2D.from_fields(colors=[TRUTH_RGB], radii=-1.0)),
             (p.speed, rr.SeriesLines(names=f"{foot} speed", colors=[rgb], widths=1.5)),
             (p.heading, rr.SeriesLines(names=f"{foot} heading", colors=[rgb], widths=1.5)),
             (
@@ -225,14 +275,14 @@ def static_setup(feet: Sequence[str] = ("foot",)) -> list[tuple[str, rr.AsCompon
             ),
             (p.stance, rr.SeriesLines(names=f"{foot} stance", colors=[rgb], widths=1.5)),
             *(
-                (p.tof_height(k), rr.SeriesPoints(names=f"{foot} ToF {k} height", colors=[c], marker_sizes=1.5))
-                for k, c in enumerate(TOF_RGB)
+                (p.tof_height(k), rr.SeriesPoints(names=f"{foot} ToF {place}", colors=[c], marker_sizes=1.5))
+                for k, (place, c) in enumerate(zip(TOF_PLACES, TOF_RGB, strict=True))
             ),
             (
                 p.stride_clearance,
                 rr.SeriesPoints(
                     names=[f"{foot} stride min", f"{foot} stride max"],
-                    colors=[(0, 0, 0), (0, 0, 0)],
+                    colors=[MARKER_RGB, MARKER_RGB],
                     markers=["down", "up"],
                     marker_sizes=[5.0, 5.0],
                 ),
@@ -241,7 +291,7 @@ def static_setup(feet: Sequence[str] = ("foot",)) -> list[tuple[str, rr.AsCompon
                 p.tof_readings,
                 rr.SeriesLines(
                     names=[f"{foot} used", f"{foot} gated", f"{foot} invalid status"],
-                    colors=[(60, 180, 75), (230, 80, 60), (120, 120, 120)],
+                    colors=[(0, 158, 115), (213, 94, 0), (150, 150, 150)],
                     widths=1.5,
                 ),
             ),
@@ -250,16 +300,16 @@ def static_setup(feet: Sequence[str] = ("foot",)) -> list[tuple[str, rr.AsCompon
                 p.pos_sigma,
                 rr.SeriesLines(
                     names=[f"{foot} σx", f"{foot} σy", f"{foot} σz", f"{foot} √trace"],
-                    colors=[(230, 80, 60), (60, 180, 75), (0, 130, 200), (120, 120, 120)],
+                    colors=[(213, 94, 0), (0, 158, 115), (0, 114, 178), (150, 150, 150)],
                     widths=1.5,
                 ),
             ),
             (
                 p.detector,
                 rr.SeriesLines(
-                    names=[f"{foot} statistic", f"{foot} threshold"],
-                    colors=[rgb, (200, 0, 0)],
-                    widths=[1.0, 1.0],
+                    names=[f"{foot} log10 statistic", f"{foot} log10 threshold"],
+                    colors=[rgb, MARKER_RGB if len(feet) == 1 else _darker(rgb)],
+                    widths=[1.0, 1.5],
                 ),
             ),
             (

@@ -158,8 +158,12 @@ class NavArrays:
         return half_sizes.astype(np.float32), quat.astype(np.float32)
 
 
-def nav_arrays(nav: NavBatch, *, sigma_scale: float = DEFAULT_SIGMA_SCALE) -> NavArrays:
-    """Convert a NavBatch of n samples to :class:`NavArrays` (pure numpy)."""
+def nav_arrays(
+    nav: NavBatch, *, sigma_scale: float = DEFAULT_SIGMA_SCALE, heading_before_deg: float | None = None
+) -> NavArrays:
+    """Convert a NavBatch of n samples to :class:`NavArrays` (pure numpy): the detector as log10 of
+    its statistic and threshold (they span five decades), the heading continuous from
+    ``heading_before_deg`` (the previous batch's last) on."""
     n = len(nav)
     stance = np.asarray(nav.stance, dtype=bool)
     return NavArrays(
@@ -172,16 +176,34 @@ def nav_arrays(nav: NavBatch, *, sigma_scale: float = DEFAULT_SIGMA_SCALE) -> Na
         stance=stance.astype(np.float64),
         clearance=np.asarray(nav.clearance_m, dtype=np.float64),
         pos_sigma=pos_sigmas(nav.pos_cov_n_m2),
-        detector=np.stack(
-            [
-                np.asarray(nav.detector_stat, dtype=np.float64),
-                np.broadcast_to(np.asarray(nav.detector_threshold, dtype=np.float64), (n,)),
-            ],
-            axis=-1,
+        detector=log10_or_nan(
+            np.stack(
+                [
+                    np.asarray(nav.detector_stat, dtype=np.float64),
+                    np.broadcast_to(np.asarray(nav.detector_threshold, dtype=np.float64), (n,)),
+                ],
+                axis=-1,
+            )
         ),
         speed=np.hypot(nav.vel_n_mps[:, 0], nav.vel_n_mps[:, 1]).astype(np.float64),
-        heading=heading_deg(nav.quat_nb_wxyz),
+        heading=continuous_deg(heading_deg(nav.quat_nb_wxyz), heading_before_deg),
     )
+
+
+def log10_or_nan(values: F64) -> F64:
+    """log10 of the values, NaN where they are not positive."""
+    v = np.asarray(values, dtype=np.float64)
+    out = np.full(v.shape, np.nan)
+    np.log10(v, out=out, where=v > 0)
+    return out
+
+
+def continuous_deg(angle_deg: F64, before_deg: float | None) -> F64:
+    """Angles (n,) in degrees unwrapped into a continuous turn, continuing from ``before_deg``."""
+    a = np.asarray(angle_deg, dtype=np.float64)
+    if before_deg is None or not np.isfinite(before_deg):
+        return np.unwrap(a, period=360.0)
+    return np.unwrap(np.concatenate([[before_deg], a]), period=360.0)[1:]
 
 
 def heading_deg(quat_nb_wxyz: F64) -> F64:

@@ -27,10 +27,11 @@ from types import TracebackType
 import numpy as np
 import rerun as rr
 from footnav.pipeline.nav_types import ClearanceSeries, NavBatch, concat_batches
-from footnav.views import convert
+from footnav.views import convert, plan
 from footnav.views.blueprint import build_blueprint, floor_patch, static_setup
 from footnav.views.dual_imu import DualRunView, dual_columns, static_styles
-from footnav.views.paths import DEFAULT_FOOT, EVENTS, DualPaths, FootPaths
+from footnav.views.paths import DEFAULT_FOOT, EVENTS, STRIDES, TIMELINE, DualPaths, FootPaths, PlanPaths
+from footnav.views.strides import StrideTable
 from numpy.typing import NDArray
 from rerun.sinks import LogSinkLike
 
@@ -61,11 +62,6 @@ SMOOTHED_EVERY = 10
 the same trail and plot, a tenth of the file and the logging)."""
 LINE_PERIOD_S = 0.5
 """The decimated track line is re-logged at most this often, in device time and in wall time (≤ 2 Hz)."""
-LINE_POINT_SPACING_S = 0.1
-"""The line keeps one point per this much device time to start with ..."""
-LINE_MAX_POINTS = 500
-"""... and halves its points (doubling the spacing) whenever it holds more than this, so each
-re-log costs at most ~6 kB however long the session runs."""
 DUAL_TRACK_EVERY = 10
 """A dual-IMU board's per-IMU tracks are logged every this many samples."""
 
@@ -110,31 +106,6 @@ class _Link:
     lost_packets: int
     reconnects: int
     clock_rate_hz: float
-
-
-@dataclass(slots=True)
-class _Line:
-    """Decimated track of one foot (kept on the logger thread)."""
-
-    points: list[tuple[float, float, float]]
-    spacing_s: float = LINE_POINT_SPACING_S
-    next_t_s: float = -np.inf
-    logged_t_s: float = -np.inf
-    logged_wall: float = -np.inf
-    last_t_s: float = -np.inf
-    dirty: bool = False
-
-    def add(self, t_s: NDArray[np.float64], pos: NDArray[np.float32]) -> None:
-        for k in range(t_s.shape[0]):
-            if t_s[k] >= self.next_t_s:
-                self.points.append((float(pos[k, 0]), float(pos[k, 1]), float(pos[k, 2])))
-                self.next_t_s = float(t_s[k]) + self.spacing_s
-                self.dirty = True
-        if t_s.shape[0]:
-            self.last_t_s = float(t_s[-1])
-        if len(self.points) > LINE_MAX_POINTS:
-            self.points = self.points[::2]
-            self.spacing_s *= 2.0
 
 
 _STOP = object()
@@ -216,12 +187,15 @@ class RerunLogger:
         max_queued_samples: int = DEFAULT_MAX_QUEUED_SAMPLES,
         flush_period_s: float = FLUSH_PERIOD_S,
         dual_runs: Sequence[str] = (),
+        tof: bool = False,
     ) -> None:
         if not sinks:
             raise ValueError("RerunLogger needs at least one sink (a viewer or a file); none were given")
         self.recording_id = recording_id
         self.feet = tuple(feet)
         self.dual_runs = tuple(dual_runs)
+        self.tof = tof
+        self._strides = StrideTable(self.feet)
         self._dual_styled: set[str] = set()
         self._paths = {f: FootPaths(f) for f in self.feet}
         self._sinks = tuple(sinks)
@@ -244,7 +218,11 @@ class RerunLogger:
         self._last_stance: dict[str, bool | None] = dict.fromkeys(self.feet)
         self._foot_samples: dict[str, int] = dict.fromkeys(self.feet, 0)
         self._floor_logged = False
-        self._lines: dict[str, _Line] = {f: _Line([]) for f in self.feet}
+        self._lines: dict[str, plan.DecimatedLine] = {f: plan.DecimatedLine([]) for f in self.feet}
+        self._grid: tuple[float, float, float, float] | None = None
+        self._heading_deg: dict[str, float] = {}
+        """Per foot: the last heading logged, degrees (the plot is a continuous turn)."""
+        """The plan view's grid bounds, plan axes, m (``footnav.views.plan.grid_bounds``)."""
         self._steps: dict[str, int] = dict.fromkeys(self.feet, 0)
         self._tof_totals: dict[str, np.ndarray] = {}
         """Per foot: ToF readings since the start [used, gated, invalid status] (``convert.tof_columns``)."""
@@ -367,7 +345,10 @@ class RerunLogger:
     def _run(self) -> None:
         rec = self.recording
         try:
-            rec.set_sinks(*self._sinks, default_blueprint=build_blueprint(self.feet, dual_runs=self.dual_runs))
+            blueprint = build_blueprint(
+                self.feet, dual_runs=self.dual_runs, tof=self.tof, sigma_scale=self._sigma_scale
+            )
+            rec.set_sinks(*self._sinks, default_blueprint=blueprint)
             for path, archetype in static_setup(self.feet):
                 rec.log(path, archetype, static=True)
         except Exception as exc:  # no usable sink: drain and discard rather than buffer in memory
@@ -470,7 +451,9 @@ class RerunLogger:
     def _send_nav(self, foot: str, nav: NavBatch) -> None:
         paths = self._paths[foot]
         rec = self.recording
-        arrays = convert.nav_arrays(nav, sigma_scale=self._sigma_scale)
+        arrays = convert.nav_arrays(nav, sigma_scale=self._sigma_scale, heading_before_deg=self._heading_deg.get(foot))
+        if arrays.heading.size:
+            self._heading_deg[foot] = float(arrays.heading[-1])
         if not self._floor_logged:
             floor_z = float(arrays.pos[0, 2] - arrays.clearance[0])
             if np.isfinite(floor_z):
@@ -485,6 +468,13 @@ class RerunLogger:
         )
         onsets = nav.step_onsets if nav.step_onsets is not None else np.zeros(0, dtype=np.intp)
         columns_list += convert.step_columns(arrays, nav.pos_cov_n_m2, onsets, paths, sigma_scale=self._sigma_scale)
+        columns_list += plan.step_columns(
+            arrays.t_s[onsets],
+            nav.pos_n_m[onsets],
+            nav.pos_cov_n_m2[onsets],
+            PlanPaths(foot),
+            sigma_scale=self._sigma_scale,
+        )
         columns_list += convert.tof_columns(nav, paths, self._tof_totals.setdefault(foot, np.zeros(3, np.int64)))
         if nav.smoothed is not None:
             columns_list += convert.smoothed_columns(nav.smoothed, paths, every=SMOOTHED_EVERY)
@@ -499,6 +489,9 @@ class RerunLogger:
         if gait is not None:
             rec.send_columns(gait[0], indexes=[gait[1]], columns=gait[2])
         self._last_stance[foot] = bool(nav.stance[-1])
+        if self._strides.update(foot, nav):
+            rec.set_time(TIMELINE, duration=float(arrays.t_s[-1]))
+            rec.log(STRIDES, rr.TextDocument(self._strides.markdown(), media_type=rr.MediaType.MARKDOWN))
         self._last_t_s = float(arrays.t_s[-1])
 
     def _send_events(self, events: list[_Event]) -> None:
@@ -524,19 +517,25 @@ class RerunLogger:
             self.recording.send_columns(paths.link_errors, indexes=[index], columns=rr.Scalars.columns(scalars=errors))
 
     def _send_lines(self, final: bool) -> None:
-        """Re-log each foot's decimated track line if it grew and ≥ LINE_PERIOD_S passed (device and wall)."""
+        """Re-log each foot's decimated track line, in 3D and in the plan view (with its grid), if it grew
+        and ≥ LINE_PERIOD_S passed (device and wall)."""
         now = time.monotonic()
+        rec = self.recording
         for foot, line in self._lines.items():
             if not line.dirty or len(line.points) < 2:
                 continue
             t = line.last_t_s
             if not final and (t - line.logged_t_s < LINE_PERIOD_S or now - line.logged_wall < LINE_PERIOD_S):
                 continue
-            self.recording.send_columns(
-                self._paths[foot].line,
-                indexes=[convert.time_column(np.array([t]))],
-                columns=rr.LineStrips3D.columns(strips=[np.asarray(line.points, dtype=np.float32)]),
-            )
+            points = np.asarray(line.points, dtype=np.float32)
+            rec.set_time(TIMELINE, duration=t)
+            rec.log(self._paths[foot].line, rr.LineStrips3D([points]))
+            for entity, archetype in plan.line_archetypes(points, PlanPaths(foot)):
+                rec.log(entity, archetype)
+            if (grid := plan.grid_bounds(plan.to_plan(points), self._grid)) is not None:
+                self._grid = grid
+                for entity, archetype in plan.grid_archetypes(grid):
+                    rec.log(entity, archetype)
             line.logged_t_s, line.logged_wall, line.dirty = t, now, False
 
     def _send_dual(self, item: _Dual) -> None:
@@ -554,6 +553,9 @@ class RerunLogger:
             indexes=[convert.time_column(truth.t_s)],
             columns=rr.Points3D.columns(positions=truth.pos_n_m.astype(np.float32)),
         )
+        if truth.t_s.size:  # the whole path from its first time on, from above
+            self.recording.set_time(TIMELINE, duration=float(truth.t_s[0]))
+            self.recording.log(PlanPaths(truth.foot).truth, rr.LineStrips2D([plan.to_plan(truth.pos_n_m)]))
 
     def _send_swing_rest(self, item: _SwingRest) -> None:
         for path, index, columns in convert.series_columns(self._paths[item.foot].swing_clearance, *item.series):

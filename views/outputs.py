@@ -186,10 +186,12 @@ def open_session_views(
     environ: Mapping[str, str] | None = None,
     dual_runs: Sequence[str] = (),
     rrd_footer: bool = True,
+    tof: bool = False,
 ) -> tuple[SessionViews | None, list[str]]:
     """Start a session's outputs and describe them.
 
-    ``rrd_footer=False`` (live sessions, whose length is open): the ``.rrd`` file gets no footer
+    ``tof``: the session has ToF units (their panels are in the layout). ``rrd_footer=False`` (live
+    sessions, whose length is open): the ``.rrd`` file gets no footer
     index, which Rerun's file sink keeps in memory until the file closes (about 2.3 MB per minute of
     two feet at 1 kHz); the file reads like one whose writer was stopped (``RrdReader.stream()``, the
     viewer), and ``rerun rrd optimize`` adds the index.
@@ -212,7 +214,9 @@ def open_session_views(
     def logger(sink: rr.GrpcSink | rr.FileSink) -> RerunLogger:
         # a file needs no live updates; fewer, larger chunks also keep the footer index small
         flush = FILE_FLUSH_PERIOD_S if isinstance(sink, rr.FileSink) else FLUSH_PERIOD_S
-        return RerunLogger([sink], recording_id=recording_id, feet=feet, dual_runs=dual_runs, flush_period_s=flush)
+        return RerunLogger(
+            [sink], recording_id=recording_id, feet=feet, dual_runs=dual_runs, flush_period_s=flush, tof=tof
+        )
 
     fallback = False
     if web:

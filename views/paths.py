@@ -42,7 +42,11 @@ EVENTS = "events"
 """TextLog entries (session events, warnings, dropped-data errors)."""
 
 PLOTS = "plots"
+PLAN = "plan"
+"""Root of the plan view: the horizontal track from above (``footnav.views.plan``), in plan axes (x, −y)."""
 GAIT = "gait"
+STRIDES = "strides"
+"""TextDocument: the last strides of every foot and their means (``footnav.views.strides``)."""
 TRUTH = "world/truth"
 
 DEFAULT_FOOT = "foot"
@@ -245,3 +249,35 @@ class DualPaths:
     def residual(self, name: str, axis: str) -> str:
         """One axis of a constraint residual."""
         return f"{self.plots}/{name}/{axis}"
+
+
+@dataclass(frozen=True, slots=True)
+class PlanPaths:
+    """Entity paths of one foot in the plan view (``plan/<foot>/...``, 2D, plan axes)."""
+
+    foot: str = DEFAULT_FOOT
+
+    @property
+    def line(self) -> str:
+        """The decimated track (LineStrips2D, re-logged with the 3D line)."""
+        return f"{PLAN}/{self.foot}/line"
+
+    @property
+    def ends(self) -> str:
+        """Start and current end of the track (Points2D, labelled)."""
+        return f"{PLAN}/{self.foot}/ends"
+
+    @property
+    def steps(self) -> str:
+        """One marker per step (Points2D), shown as a trail."""
+        return f"{PLAN}/{self.foot}/steps"
+
+    @property
+    def step_cov(self) -> str:
+        """The k-sigma ellipse of each step's horizontal position (LineStrips2D), shown as a trail."""
+        return f"{PLAN}/{self.foot}/step_cov"
+
+    @property
+    def truth(self) -> str:
+        """Ground-truth track from above (LineStrips2D)."""
+        return f"{PLAN}/truth/{self.foot}"

@@ -235,6 +235,7 @@ async def live_session(opts: LiveOptions) -> int:
         recording_id=session_id,
         notice=notice,
         dual_runs=feet if dual is not None else (),
+        tof=opts.tof,
         rrd_footer=False,  # a live session's length is open: its memory must stay flat
     )
     for note in notes:

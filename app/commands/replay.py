@@ -244,6 +244,7 @@ def run_replay(opts: ReplayOptions) -> int:
         recording_id=str(info.session.get("session_id", opts.path.stem)),
         notice=notice,
         dual_runs=tuple(lever_of),
+        tof=any(bool(u.settings.get("extensions", False)) for u in info.units),
     )
     for note in notes:
         print(note, file=sys.stderr)
