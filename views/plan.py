@@ -123,7 +123,8 @@ def grid_archetypes(bounds: tuple[float, float, float, float]) -> list[tuple[str
         v = [np.array([[x, y0], [x, y1]], dtype=np.float32) for x in values_x]
         return v + [np.array([[x0, y], [x1, y]], dtype=np.float32) for y in values_y]
 
-    label_x, label_y = xs[_major(xs)], ys[_major(ys)]
+    label_x, major_y = xs[_major(xs)], ys[_major(ys)]
+    label_y = major_y[major_y < y1]  # the bottom line's corner carries an x label
     positions = np.concatenate(
         [np.column_stack([label_x, np.full(label_x.size, y1)]), np.column_stack([np.full(label_y.size, x0), label_y])]
     ).astype(np.float32)
@@ -133,7 +134,7 @@ def grid_archetypes(bounds: tuple[float, float, float, float]) -> list[tuple[str
             f"{PLAN}/grid/minor",
             rr.LineStrips2D(lines(xs[~_major(xs)], ys[~_major(ys)]), colors=[GRID_RGBA], radii=-0.5),
         ),
-        (f"{PLAN}/grid/major", rr.LineStrips2D(lines(label_x, label_y), colors=[GRID_MAJOR_RGBA], radii=-1.0)),
+        (f"{PLAN}/grid/major", rr.LineStrips2D(lines(label_x, major_y), colors=[GRID_MAJOR_RGBA], radii=-1.0)),
         (f"{PLAN}/grid/labels", rr.Points2D(positions, labels=labels, radii=-2.0, colors=[GRID_MAJOR_RGBA])),
     ]
 
