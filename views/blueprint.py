@@ -163,7 +163,9 @@ def build_blueprint(
     window = _window(plot_window_s)
 
     def series(name: str, quantity: str, *, windowed: bool = True, **kw: Any) -> rrb.TimeSeriesView:
-        legend = rrb.PlotLegend(rrb.Corner2D.LeftTop, visible=len(feet) > 1 or quantity in MULTI_SERIES)
+        # legends on the left (older data), over the zero line of quantities that rest at zero in stance
+        corner = rrb.Corner2D.LeftBottom if quantity in ("clearance", "speed") else rrb.Corner2D.LeftTop
+        legend = rrb.PlotLegend(corner, visible=len(feet) > 1 or quantity in MULTI_SERIES)
         return rrb.TimeSeriesView(
             name=name,
             origin=f"/{PLOTS}/{quantity}",

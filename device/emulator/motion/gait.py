@@ -38,6 +38,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -309,12 +310,17 @@ def _stride_schedule(
     initial_still_s: float,
     max_strides: int | None,
     t_last_s: float,
+    side_m: float = 0.0,
 ) -> _Strides:
     """Enough candidate strides with their random variation, then those that end in time."""
     level_period_s = paths.stride_period_s(speed_mps)
     min_period_s = min(level_period_s, paths.STAIR_STRIDE_PERIOD_S) * (1.0 - 2.0 * _PERIOD_JITTER)
     n_max = max(0, math.ceil((duration_s - initial_still_s) / min_period_s)) + 1
     feet = paths.footholds(path, n_max, speed_mps * level_period_s)
+    if side_m:
+        yaw = feet.yaw_rad
+        shifted = feet.pos_n_m + side_m * np.column_stack([-np.sin(yaw), np.cos(yaw), np.zeros_like(yaw)])
+        feet = dataclasses.replace(feet, pos_n_m=shifted)
     rng = np.random.default_rng(seed)
     stair_steps = feet.stair_steps
     on_stairs = stair_steps != 0
@@ -394,6 +400,10 @@ def _fill_swing(
     motion.roll_rate_radps[sw] = strides.roll_rad[i] * c1
 
 
+FOOT_SIDE_M = 0.1
+"""How far each foot's footholds lie from the walking line, m (half the step width)."""
+
+
 def simulate_walk(
     path: str,
     duration_s: float,
@@ -403,6 +413,7 @@ def simulate_walk(
     seed: int = 0,
     initial_still_s: float = 3.0,
     max_strides: int | None = None,
+    side_m: float = 0.0,
 ) -> GaitTruth:
     """Simulate one instrumented foot walking a course, with its true IMU signals.
 
@@ -423,6 +434,10 @@ def simulate_walk(
     max_strides : int or None
         Walk at most this many strides (e.g. one lap, ``paths.footholds(...).lap_strides``), then rest
         to the end of the record; None walks as many as fit.
+    side_m : float
+        The foot's footholds lie this far to the left of the course's line (negative: right), m, so
+        that on a turn the inner foot walks the shorter way (two feet: ±0.1 m,
+        :func:`two_feet_walks`). The track still starts at the origin.
 
     Returns
     -------
@@ -450,7 +465,7 @@ def simulate_walk(
     t_s = np.arange(n) / rate_hz
     t_last_s = (n - 1) / rate_hz if n else 0.0
 
-    strides = _stride_schedule(path, duration_s, speed_mps, seed, initial_still_s, max_strides, t_last_s)
+    strides = _stride_schedule(path, duration_s, speed_mps, seed, initial_still_s, max_strides, t_last_s, side_m)
     m = strides.swing_start_s.size
     swing_start_s, swing_end_s, swing_s = strides.swing_start_s, strides.swing_end_s, strides.swing_s
     foot_pos_n_m, foot_yaw_rad = strides.foot_pos_n_m, strides.foot_yaw_rad
@@ -533,3 +548,17 @@ def simulate_walk(
         rate_hz=float(rate_hz),
         n_strides=m,
     )
+
+
+def two_feet_walks(
+    path: str, duration_s: float, rate_hz: float = 1000.0, speed_mps: float = 1.4, *, seed: int = 0
+) -> tuple[GaitTruth, GaitTruth]:
+    """The left and the right foot of one walker: footholds 0.1 m either side of the course's line,
+    the right foot half a stride behind the left, each with its own stride-to-stride variation
+    (seeds ``seed`` and ``seed + 1``); each track starts at its own origin."""
+    half_stride_s = 0.5 * paths.stride_period_s(speed_mps)
+    left = simulate_walk(path, duration_s, rate_hz, speed_mps, seed=seed, side_m=FOOT_SIDE_M)
+    right = simulate_walk(
+        path, duration_s, rate_hz, speed_mps, seed=seed + 1, side_m=-FOOT_SIDE_M, initial_still_s=3.0 + half_stride_s
+    )
+    return left, right
