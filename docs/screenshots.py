@@ -24,6 +24,8 @@ PICTURES: dict[str, list[str]] = {
     "two-feet": ["demo", "--feet", "2", "--duration", "40", "--pace", "max"],
     "tof": ["demo", "--tof", "--path", "stairs", "--duration", "40", "--pace", "max"],
     "real-recording": ["replay", "{data}/xio-gait-tracking/short_walk.csv"],
+    "pyshoe-truth": ["replay", "{data}/pyshoe-vicon/2017-11-22-11-22-03.mat"],
+    "openshoe-log": ["replay", "{data}/openshoe/data_inert.txt"],
 }
 """Picture name -> the footnav command that records it (``{data}``: the recordings folder)."""
 

@@ -115,6 +115,7 @@ def build_blueprint(
     plot_window_s: float = PLOT_WINDOW_S,
     dual_runs: Sequence[str] = (),
     tof: bool = False,
+    truth: bool = False,
     sigma_scale: float = 3.0,
 ) -> rrb.Blueprint:
     """The default blueprint for a session with the given feet.
@@ -130,6 +131,8 @@ def build_blueprint(
         and their constraint residuals get a plot of their own.
     tof
         the session has ToF units: their readings' and the pressure altitude's panels are shown.
+    truth
+        the session has a ground truth: the estimate's error from it gets a panel.
     sigma_scale
         the ellipses' size in standard deviations (stated in the plan view's title).
     """
@@ -192,6 +195,7 @@ def build_blueprint(
         rrb.Tabs(
             series("ZUPT detector: log10 statistic, log10 threshold", "detector"),
             series("Position σ [m]", "pos_sigma", windowed=False),
+            *([series("Error from the truth [m], horizontal", "truth_error", windowed=False)] if truth else []),
             *tof_panels,
         ),
         *[
@@ -298,6 +302,7 @@ def static_setup(feet: Sequence[str] = ("foot",)) -> list[tuple[str, rr.AsCompon
                 ),
             ),
             (p.altitude, rr.SeriesLines(names=f"{foot} pressure altitude", colors=[rgb], widths=1.5)),
+            (p.truth_error, rr.SeriesLines(names=f"{foot} error from the truth", colors=[rgb], widths=1.5)),
             (
                 p.pos_sigma,
                 rr.SeriesLines(

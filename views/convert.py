@@ -403,3 +403,14 @@ def step_columns(
             ),
         ),
     ]
+
+
+def horizontal_error_m(t_s: F64, pos_n_m: F64, truth_t_s: F64, truth_pos_n_m: F64) -> F64:
+    """(n,) horizontal distance of the (n, 3) estimates at ``t_s`` (n,) from the ground truth, m,
+    linearly interpolated at those times; NaN outside the truth's time span."""
+    tt = np.asarray(truth_t_s, dtype=np.float64)
+    if tt.size < 2:
+        return np.full(np.shape(t_s), np.nan)
+    gx = np.interp(t_s, tt, truth_pos_n_m[:, 0], left=np.nan, right=np.nan)
+    gy = np.interp(t_s, tt, truth_pos_n_m[:, 1], left=np.nan, right=np.nan)
+    return np.hypot(np.asarray(pos_n_m)[:, 0] - gx, np.asarray(pos_n_m)[:, 1] - gy)

@@ -188,13 +188,14 @@ class RerunLogger:
         flush_period_s: float = FLUSH_PERIOD_S,
         dual_runs: Sequence[str] = (),
         tof: bool = False,
+        truth: bool = False,
     ) -> None:
         if not sinks:
             raise ValueError("RerunLogger needs at least one sink (a viewer or a file); none were given")
         self.recording_id = recording_id
         self.feet = tuple(feet)
         self.dual_runs = tuple(dual_runs)
-        self.tof = tof
+        self.tof, self.truth = tof, truth
         self._strides = StrideTable(self.feet)
         self._dual_styled: set[str] = set()
         self._paths = {f: FootPaths(f) for f in self.feet}
@@ -220,6 +221,8 @@ class RerunLogger:
         self._floor_logged = False
         self._lines: dict[str, plan.DecimatedLine] = {f: plan.DecimatedLine([]) for f in self.feet}
         self._grid: tuple[float, float, float, float] | None = None
+        self._truths: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
+        """Per foot: the ground truth's times (n,) and positions (n, 3), once logged."""
         self._heading_deg: dict[str, float] = {}
         """Per foot: the last heading logged, degrees (the plot is a continuous turn)."""
         """The plan view's grid bounds, plan axes, m (``footnav.views.plan.grid_bounds``)."""
@@ -346,7 +349,7 @@ class RerunLogger:
         rec = self.recording
         try:
             blueprint = build_blueprint(
-                self.feet, dual_runs=self.dual_runs, tof=self.tof, sigma_scale=self._sigma_scale
+                self.feet, dual_runs=self.dual_runs, tof=self.tof, truth=self.truth, sigma_scale=self._sigma_scale
             )
             rec.set_sinks(*self._sinks, default_blueprint=blueprint)
             for path, archetype in static_setup(self.feet):
@@ -480,6 +483,10 @@ class RerunLogger:
             columns_list += convert.smoothed_columns(nav.smoothed, paths, every=SMOOTHED_EVERY)
         if nav.swing_clearance is not None:
             columns_list += convert.series_columns(paths.swing_clearance, *nav.swing_clearance)
+        if (truth := self._truths.get(foot)) is not None:
+            every = slice(None, None, max(1, self._series_every))
+            error = convert.horizontal_error_m(arrays.t_s[every], nav.pos_n_m[every], *truth)
+            columns_list += convert.series_columns(paths.truth_error, arrays.t_s[every], error)
         for path, index, columns in columns_list:
             rec.send_columns(path, indexes=[index], columns=columns)
         self._steps[foot] += int(onsets.size)
@@ -548,6 +555,7 @@ class RerunLogger:
             self.recording.send_columns(entity, indexes=[index], columns=columns)
 
     def _send_truth(self, truth: _Truth) -> None:
+        self._truths[truth.foot] = (truth.t_s, truth.pos_n_m)
         self.recording.send_columns(
             self._paths[truth.foot].truth,
             indexes=[convert.time_column(truth.t_s)],

@@ -187,10 +187,12 @@ def open_session_views(
     dual_runs: Sequence[str] = (),
     rrd_footer: bool = True,
     tof: bool = False,
+    truth: bool = False,
 ) -> tuple[SessionViews | None, list[str]]:
     """Start a session's outputs and describe them.
 
-    ``tof``: the session has ToF units (their panels are in the layout). ``rrd_footer=False`` (live
+    ``tof``: the session has ToF units (their panels are in the layout); ``truth``: it has a ground
+    truth (the error from it gets a panel). ``rrd_footer=False`` (live
     sessions, whose length is open): the ``.rrd`` file gets no footer
     index, which Rerun's file sink keeps in memory until the file closes (about 2.3 MB per minute of
     two feet at 1 kHz); the file reads like one whose writer was stopped (``RrdReader.stream()``, the
@@ -215,7 +217,13 @@ def open_session_views(
         # a file needs no live updates; fewer, larger chunks also keep the footer index small
         flush = FILE_FLUSH_PERIOD_S if isinstance(sink, rr.FileSink) else FLUSH_PERIOD_S
         return RerunLogger(
-            [sink], recording_id=recording_id, feet=feet, dual_runs=dual_runs, flush_period_s=flush, tof=tof
+            [sink],
+            recording_id=recording_id,
+            feet=feet,
+            dual_runs=dual_runs,
+            flush_period_s=flush,
+            tof=tof,
+            truth=truth,
         )
 
     fallback = False

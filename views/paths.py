@@ -156,6 +156,11 @@ class FootPaths:
         return f"{PLOTS}/heading/{self.foot}"
 
     @property
+    def truth_error(self) -> str:
+        """Horizontal distance of the estimate from the ground truth at the same time, m."""
+        return f"{PLOTS}/truth_error/{self.foot}"
+
+    @property
     def rate(self) -> str:
         """Link health: samples received per second of host time, Hz."""
         return f"{PLOTS}/rate/{self.foot}"
