@@ -123,7 +123,9 @@ def test_ins_output_live_captured_and_replayed(walk: GaitTruth, tmp_path: Path) 
     np.testing.assert_array_equal(again.pos_n_m[:m], track.pos_n_m[:m])
 
 
-@pytest.mark.parametrize(("model", "k", "rate_hz"), [("openshoe", 0, 819.2), ("mimu4444", 0, 250.0), ("mimu4444", 3, 31.25)])
+@pytest.mark.parametrize(
+    ("model", "k", "rate_hz"), [("openshoe", 0, 819.2), ("mimu4444", 0, 250.0), ("mimu4444", 3, 31.25)]
+)
 def test_units_at_other_base_rates_are_asked_and_navigated_at_their_rate(
     tmp_path: Path, model: str, k: int, rate_hz: float
 ) -> None:
