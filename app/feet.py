@@ -285,7 +285,10 @@ def attach_unit(run: FootRun, unit: OpenShoeUnit) -> None:
 def link_summary(run: FootRun) -> str:
     """One line on a foot's link at the end of a session."""
     lost = run.result.link.lost_packets if run.result.link is not None else 0
-    line = f"samples received: {run.result.samples_received} (lost packets: {lost})"
+    rejected = ""
+    if (stats := run.result.link) is not None and (stats.corrupt_numbers or stats.implausible_rejected):
+        rejected = f"; rejected: {stats.corrupt_numbers} corrupt numbers, {stats.implausible_rejected} implausible"
+    line = f"samples received: {run.result.samples_received} (lost packets: {lost}{rejected})"
     health = run.result.link_health
     if health is not None:
         still_open = ", the last one still open at the end" if health.gaps and health.gaps[-1].end_ns is None else ""

@@ -15,9 +15,10 @@ Start (protocol-openshoe.md sections 3, 5, 6, 10):
 - in lossless mode (forced by SWDR) every data packet is ACKed, resends included (section 6).
 
 Stream: each read's packets become typed batches (:data:`Batch`), duplicates dropped, the package
-number tracked over all packets of the interface (one counter is shared by every output), the 64 MHz
-tick counter unwrapped on one clock for every packet kind. Packets of unknown length or kind are
-counted and logged once per length, never fatal.
+number tracked over all packets of the interface (one counter is shared by every output; a number is
+believed only in its run, :mod:`footnav.device.protocol.sequence`), values no unit sends rejected
+(:mod:`footnav.device.protocol.integrity`), the 64 MHz tick counter unwrapped on one clock for every
+packet kind. Packets of unknown length or kind are counted and logged once per length, never fatal.
 
 Stop: processing off then outputs off of the detected set (``32``/``22``, or ``27``/``21``), as the
 vendor host apps do.
@@ -47,9 +48,11 @@ from footnav.device.protocol import commands as p
 from footnav.device.protocol import extensions, ins_states, raw_imu, stepwise
 from footnav.device.protocol.extensions import BaroBatch, TofBatch
 from footnav.device.protocol.framer import DataPacket, DeviceAck, Framer, PacketRun
-from footnav.device.protocol.imu import PAYLOAD_LEN, CounterTracker, SharedTickClock, decode_payloads
+from footnav.device.protocol.imu import PAYLOAD_LEN, SharedTickClock, decode_payloads
 from footnav.device.protocol.ins_states import InsLayout, InsStateBatch
+from footnav.device.protocol.integrity import ImuGuard, ins_plausible, step_plausible
 from footnav.device.protocol.raw_imu import RawImuBatch, RawImuLayout
+from footnav.device.protocol.sequence import FAR_AHEAD, NO_TICK, CounterTracker
 from footnav.device.protocol.stepwise import StepBatch, StepwiseTracker
 from footnav.pipeline.samples import ImuBatch
 
@@ -80,7 +83,8 @@ class LinkStats:
     bad_lengths: int
     """Candidate data packets with an impossible length byte."""
     lost_packets: int
-    """Package numbers below the highest received that never arrived."""
+    """Package numbers below the highest received that never arrived (a rejected packet that arrived in
+    a number's place stands for it: that number is not counted here)."""
     duplicates: int
     """Packets whose number had already been received (resends, repeats; dropped from the batches)."""
     out_of_order: int
@@ -94,6 +98,11 @@ class LinkStats:
     """Host ACKs of data packets sent (lossless mode), resends included."""
     firmware: str = ""
     """Detected command set ("2015" or "2014"), "" before the probe."""
+    corrupt_numbers: int = 0
+    """Packets rejected because their number or time stamp contradicted the run (a corruption the
+    checksum missed, :mod:`footnav.device.protocol.sequence`); not counted lost as well."""
+    implausible_rejected: int = 0
+    """Packets rejected for values the unit cannot send (:mod:`footnav.device.protocol.integrity`)."""
 
 
 @dataclass
@@ -146,6 +155,10 @@ class OpenShoeUnit:
         self._framer = Framer()
         self._clock = SharedTickClock()
         self._counters = CounterTracker()
+        self._held: list[tuple[int, bytes]] = []  # suspects of the tracker: (number, payload)
+        self._imu_guard = ImuGuard()
+        self._raw_guard = ImuGuard(None, None)  # int16 registers cannot exceed the range
+        self._implausible = 0
         self._pending: list[list[Batch]] = []
         self._acks: list[int] = []
         self._bytes_received = 0
@@ -206,6 +219,8 @@ class OpenShoeUnit:
             lost_packets=c.lost,
             duplicates=c.duplicates,
             out_of_order=c.out_of_order,
+            corrupt_numbers=c.corrupt_numbers,
+            implausible_rejected=self._implausible,
             unexpected_packets=self._unexpected,
             bytes_received=self._bytes_received,
             samples=self._samples,
@@ -455,6 +470,7 @@ class OpenShoeUnit:
             self._ins_layout = InsLayout(mode.state_ids)
         self._mode = mode
         self._lossless = isinstance(mode, StepwiseMode) or bool(getattr(mode, "lossless", False))
+        self._counters.far_ahead = 1 if self._lossless else FAR_AHEAD  # lossless packets come in order
         if isinstance(mode, StepwiseMode):
             self.steps = StepwiseTracker()
 
@@ -580,17 +596,40 @@ class OpenShoeUnit:
         if self._lossless:
             self._unacked.extend(numbers)
             await self._ack_data()
-        counters, dup = self._counters.update(np.asarray(numbers, dtype=np.int64))
+        # a number is believed only in its run (suspects are held until later packets decide);
+        # numbers of packets held from earlier reads come first
+        tracked = self._counters.track(np.asarray(numbers, dtype=np.int64), self._ticks_of(payloads))
+        numbers = [n for n, _ in self._held] + numbers
+        payloads = [pl for _, pl in self._held] + payloads
+        self._held = [(numbers[i], payloads[i]) for i in tracked.held.tolist()]
         decoded = _Decoded(host_ns)
         # packets that arrived after their successors are put back in order within the read (a
         # late one whose successors went out in an earlier read reaches the estimators late:
         # they count its time step as bad)
-        order = np.argsort(counters, kind="stable") if np.any(np.diff(counters) < 0) else range(len(payloads))
-        for i in order:
-            if dup[i]:
-                continue
-            self._route(decoded, int(counters[i]), numbers[i], payloads[i])
+        counters = tracked.counter
+        order = np.argsort(counters, kind="stable") if np.any(np.diff(counters) < 0) else range(len(counters))
+        for k in order:
+            i = int(tracked.positions[k])
+            self._route(decoded, int(counters[k]), numbers[i], payloads[i])
         return self._build(decoded)
+
+    def _ticks_of(self, payloads: list[bytes]) -> np.ndarray | None:
+        """The packets' 64 MHz time stamps (``NO_TICK`` for a kind without one) when one output with
+        time stamps is on, so that numbers and ticks move together; else None (numbers only)."""
+        if self._extensions:
+            return None
+        mode = self._mode
+        if isinstance(mode, NormalImuMode):
+            length = PAYLOAD_LEN
+        elif isinstance(mode, RawImuMode) and self._raw_layout is not None:
+            length = self._raw_layout.payload_len
+        elif isinstance(mode, InsMode) and self._ins_layout is not None and self._ins_layout.has(p.STATE_IMU_TS):
+            length = self._ins_layout.payload_len
+        else:
+            return None
+        return np.asarray(
+            [int.from_bytes(pl[:4], "big") if len(pl) == length else NO_TICK for pl in payloads], dtype=np.int64
+        )
 
     def _normal_run(self, run: PacketRun, host_ns: int) -> list[Batch] | None:
         """A read that is one run of normal-IMU packets in sequence, decoded without a per-packet
@@ -600,12 +639,22 @@ class OpenShoeUnit:
             and run.payloads.shape[1] == PAYLOAD_LEN
             and not self._lossless
             and not self._awaiting_mcu_id
-            and self._counters.continues(run.numbers)
         ):
             return None
-        counters, _ = self._counters.update(run.numbers)
         arr = decode_payloads(run.payloads.tobytes())
+        # numbers only while extension packets share the counter (see _ticks_of)
+        taken = self._counters.take_run(run.numbers, None if self._extensions else arr.ticks.astype(np.int64))
+        if taken is None:
+            return None
+        counters = taken
         m = len(run)
+        ok = self._imu_guard.check(counters, arr.acc_b_mps2, arr.gyr_b_radps)
+        if not ok.all():
+            self._implausible += m - int(np.count_nonzero(ok))
+            arr = type(arr)(arr.ticks[ok], arr.acc_b_mps2[ok], arr.gyr_b_radps[ok])
+            counters, m = counters[ok], int(np.count_nonzero(ok))
+            if m == 0:
+                return []
         self._samples += m
         t_s = self._clock.update(arr.ticks.astype(np.int64))
         host = np.full(m, host_ns, dtype=np.int64)
@@ -641,8 +690,31 @@ class OpenShoeUnit:
                     payload[:16].hex(" "),
                 )
 
+    def _drop_implausible(self, d: _Decoded) -> None:
+        """Leave out, counted, the records no unit can send (:mod:`footnav.device.protocol.integrity`)."""
+        masks: list[tuple[list[tuple[int, bytes]], np.ndarray]] = []
+        if d.normal:
+            arr = decode_payloads(b"".join(pl for _, pl in d.normal))
+            counters = np.asarray([c for c, _ in d.normal], dtype=np.int64)
+            masks.append((d.normal, self._imu_guard.check(counters, arr.acc_b_mps2, arr.gyr_b_radps)))
+        if d.raw and self._raw_layout is not None:
+            rarr = raw_imu.decode_payloads(b"".join(pl for _, pl in d.raw), self._raw_layout)
+            counters = np.asarray([c for c, _ in d.raw], dtype=np.int64)
+            masks.append((d.raw, self._raw_guard.check(counters, rarr.acc_b_mps2, rarr.gyr_b_radps)))
+        if d.ins and self._ins_layout is not None:
+            iarr = ins_states.decode_payloads(b"".join(pl for _, pl in d.ins), self._ins_layout)
+            masks.append((d.ins, ins_plausible(iarr.pos_n_m, iarr.vel_n_mps, iarr.quat_nb_wxyz)))
+        if d.steps:
+            sarr = stepwise.decode_payloads(b"".join(pl for _, pl in d.steps))
+            masks.append((d.steps, step_plausible(sarr.dx_m, sarr.dheading_rad, sarr.cov_4x4)))
+        for group, ok in masks:
+            if not ok.all():
+                self._implausible += int(np.count_nonzero(~ok))
+                group[:] = [g for g, keep in zip(group, ok.tolist(), strict=True) if keep]
+
     def _build(self, d: _Decoded) -> list[Batch]:
         """Decode each kind with one ``np.frombuffer``; one shared clock for every time stamp."""
+        self._drop_implausible(d)
         ticks: list[int] = []
         for group, offset in ((d.normal, 0), (d.raw, 0), (d.tof, 1), (d.baro, 1)):
             ticks.extend(int.from_bytes(pl[offset : offset + 4], "big") for _, pl in group)

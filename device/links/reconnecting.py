@@ -19,7 +19,8 @@ or replaced by a ``resume`` hook.
 
 Every interruption becomes a :class:`LinkGap`: when data stopped, how long until it flowed again, how
 many reconnect attempts it took, and how many packets are missing by package number (the wrapper
-frames a copy of the stream for the numbers only; the driver still sees every byte). An **idle
+frames a copy of the stream for the numbers, believed only in their run: a corrupt one misstates no
+gap, :mod:`footnav.device.protocol.sequence`; the driver still sees every byte). An **idle
 watchdog** notices a unit that stops streaming while the driver is waiting for data: after
 ``idle_timeout_s`` (1 s) it records a stall and re-sends the resume sequence; if the unit stays silent
 for another ``idle_timeout_s`` it forces a reconnect. It only runs while a continuous stream is
@@ -44,9 +45,11 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final, Literal, Self
 
+import numpy as np
 from footnav.device.errors import DeviceError
 from footnav.device.protocol import commands as protocol
-from footnav.device.protocol.framer import DataPacket, Framer, PacketRun
+from footnav.device.protocol.framer import Framer, data_numbers
+from footnav.device.protocol.sequence import COUNTER_WRAP, CounterTracker
 
 if TYPE_CHECKING:
     from types import TracebackType
@@ -61,7 +64,6 @@ BACKOFF_FACTOR: Final = 2.0
 BACKOFF_MAX_S: Final = 2.0
 IDLE_TIMEOUT_S: Final = 1.0
 """A unit that sends nothing for this long while a stream is expected is noticed as stalled."""
-_COUNTER_WRAP: Final = 1 << 16
 
 _CONTINUOUS_STARTS: Final = frozenset(
     {
@@ -122,7 +124,7 @@ class LinkGap:
         a, b = self.last_packet_before, self.first_packet_after
         if a is None or b is None:
             return None
-        step = (b - a + _COUNTER_WRAP // 2) % _COUNTER_WRAP - _COUNTER_WRAP // 2
+        step = (b - a + COUNTER_WRAP // 2) % COUNTER_WRAP - COUNTER_WRAP // 2
         return max(step - 1, 0)
 
     @property
@@ -227,6 +229,8 @@ class ReconnectingLink:
         self._explicit_resume: bytes | None = None
         self._continuous = False
         self._framer = Framer()
+        self._numbers = CounterTracker()  # a corrupt number that passed the checksum misstates no gap
+        self._held_numbers: list[int] = []
         self._last_number: int | None = None
         self._packet_len: int | None = None
         self._last_rx_ns = 0
@@ -461,20 +465,16 @@ class ReconnectingLink:
             gap.end_ns = now
             self._stalled = False
             self._unreported = gap
-        # only the first and the last packet of the read matter here: runs are not split into packets
-        for frame in self._framer.feed_runs(data):
-            if type(frame) is DataPacket:
-                first, last, payload_len = frame.number, frame.number, len(frame.payload)
-            elif type(frame) is PacketRun:
-                first, last, payload_len = int(frame.numbers[0]), int(frame.numbers[-1]), frame.payloads.shape[1]
-            else:
-                continue
-            if gap is not None and gap.first_packet_after is None:
-                gap.first_packet_after = first
+        new, payload_len = data_numbers(self._framer.feed_runs(data))
+        if payload_len is not None:
+            self._packet_len, self._streamed = payload_len + 6, True
+            tracked = self._numbers.track(new)
+            seen = np.concatenate([np.asarray(self._held_numbers, dtype=np.int64), new])
+            self._held_numbers = seen[tracked.held].tolist()
+            if tracked.positions.size and gap is not None and gap.first_packet_after is None:
+                gap.first_packet_after = int(seen[tracked.positions[np.argmin(tracked.counter)]])
                 self._gap = gap = None
-            self._last_number = last
-            self._packet_len = payload_len + 6
-            self._streamed = True
+            self._last_number = self._numbers.high_raw
         unreported = self._unreported
         if unreported is not None and unreported.first_packet_after is not None:
             self._report_resumed()

@@ -173,6 +173,21 @@ class Framer:
         return out
 
 
+def data_numbers(frames: list[Frame | PacketRun]) -> tuple[NDArray[np.int64], int | None]:
+    """The package numbers (m,) of the data packets among ``frames``, in order (runs are not split into
+    packets), and the payload length of the last one (None when there is none)."""
+    parts: list[NDArray[np.int64]] = []
+    length: int | None = None
+    for f in frames:
+        if type(f) is PacketRun:
+            parts.append(f.numbers)
+            length = int(f.payloads.shape[1])
+        elif type(f) is DataPacket:
+            parts.append(np.array([f.number], dtype=np.int64))
+            length = len(f.payload)
+    return (np.concatenate(parts) if parts else np.empty(0, dtype=np.int64)), length
+
+
 def _run_at(buf: bytearray, start: int, length: int) -> PacketRun | None:
     """The valid packets of payload ``length`` back to back from ``buf[start]``, if there are at least
     :data:`_MIN_RUN` of them; else None (the caller goes on byte by byte)."""

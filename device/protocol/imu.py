@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
+from footnav.device.protocol.sequence import CounterTracker  # noqa: F401 (its former home)
 from footnav.pipeline.samples import diff_after
 from numpy.typing import NDArray
 
@@ -65,11 +66,12 @@ def decode_payloads(payloads: bytes | bytearray | memoryview) -> NormalImuArrays
     if len(payloads) % PAYLOAD_LEN:
         raise ValueError(f"normal-IMU payloads are {PAYLOAD_LEN} bytes each; got {len(payloads)} bytes")
     rec = np.frombuffer(payloads, dtype=PAYLOAD_DTYPE)
-    return NormalImuArrays(
-        ticks=rec["ts"].astype(np.uint32),
-        acc_b_mps2=rec["acc"].astype(np.float64),
-        gyr_b_radps=rec["gyr"].astype(np.float64),
-    )
+    with np.errstate(invalid="ignore"):  # a signalling NaN (a corrupt float) stays NaN, without a warning
+        return NormalImuArrays(
+            ticks=rec["ts"].astype(np.uint32),
+            acc_b_mps2=rec["acc"].astype(np.float64),
+            gyr_b_radps=rec["gyr"].astype(np.float64),
+        )
 
 
 def seconds_to_ticks(t_s: NDArray[np.float64], tick0: int) -> NDArray[np.uint32]:
@@ -160,91 +162,6 @@ def clock_rate_hz(t_s: NDArray[np.float64]) -> float | None:
     if dt_s.size < CLOCK_RATE_INTERVALS:
         return None
     return TICK_HZ / max(1, round(float(np.percentile(dt_s, 25)) * TICK_HZ))
-
-
-class CounterTracker:
-    """Unwraps the uint16 package number and accounts for every number: received, lost, repeated, late.
-
-    Each step is taken as a signed difference modulo 2**16, so the unwrapped counter is right across
-    wraps, gaps of under 32768 packets, repeats and packets that arrive after their successors. The
-    accounting keeps the highest number seen and the set of numbers below it not yet received
-    (within ``window`` of it): a number above the highest opens a gap (``lost`` grows by its size);
-    a missing number arriving late closes its place in the gap (``lost`` shrinks, ``out_of_order``
-    grows); a number already received is a duplicate (a lossless-mode resend, or a repeat on the
-    wire). Gaps that fall more than ``window`` behind the highest number stay lost for good.
-    A stream of consecutive numbers takes one vectorised comparison, no per-packet work.
-    """
-
-    def __init__(self, window: int = 4096) -> None:
-        self._window = window
-        self._last_raw: int | None = None
-        self._last_total = 0
-        self._high = 0
-        self._missing: set[int] = set()
-        self._expired = 0
-        self.lost = 0
-        """Numbers below the highest one received that have not arrived (yet)."""
-        self.duplicates = 0
-        """Arrivals of a number already received."""
-        self.out_of_order = 0
-        """Numbers that arrived after a higher one (they filled a gap)."""
-
-    def continues(self, numbers: NDArray[np.integer]) -> bool:
-        """True if ``numbers`` (n,) are the next numbers in sequence (nothing lost, repeated or late)."""
-        raw = np.asarray(numbers, dtype=np.int64)
-        if raw.size == 0 or self._last_raw is None or self._last_total != self._high:
-            return False
-        return bool(np.all(diff_after(self._last_raw, raw) % COUNTER_WRAP == 1))
-
-    def update(self, numbers: NDArray[np.integer]) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-        """Track the next package numbers (n,), in arrival order.
-
-        Returns
-        -------
-        counters : NDArray[np.int64]
-            unwrapped counters (n,) int64.
-        duplicate : NDArray[np.bool_]
-            duplicate mask (n,): True where the number had been received before.
-        """
-        raw = np.asarray(numbers, dtype=np.int64)
-        dup = np.zeros(raw.size, dtype=np.bool_)
-        if raw.size == 0:
-            return np.empty(0, dtype=np.int64), dup
-        if self._last_raw is None:
-            self._last_raw = int(raw[0]) - 1
-            self._last_total = self._high = int(raw[0]) - 1
-        steps = (diff_after(self._last_raw, raw) + COUNTER_WRAP // 2) % COUNTER_WRAP - COUNTER_WRAP // 2
-        total = self._last_total + np.cumsum(steps)
-        self._last_raw = int(raw[-1])
-        self._last_total = int(total[-1])
-        if total[0] == self._high + 1 and np.all(steps[1:] == 1):
-            self._high = int(total[-1])
-        else:
-            self._account(total, dup)
-        missing = self._missing
-        if missing and min(missing) < self._high - self._window:
-            old = {m for m in missing if m < self._high - self._window}
-            missing -= old
-            self._expired += len(old)
-        self.lost = self._expired + len(missing)
-        return total, dup
-
-    def _account(self, total: NDArray[np.int64], dup: NDArray[np.bool_]) -> None:
-        """The per-packet bookkeeping of a read that is not one consecutive run."""
-        high, missing = self._high, self._missing
-        for i, t in enumerate(total.tolist()):
-            if t > high:
-                first_missing = max(high + 1, t - self._window)
-                self._expired += first_missing - (high + 1)
-                missing.update(range(first_missing, t))
-                high = t
-            elif t in missing:
-                missing.remove(t)
-                self.out_of_order += 1
-            else:
-                dup[i] = True
-                self.duplicates += 1
-        self._high = high
 
 
 def frame_payload_rows(numbers: NDArray[np.integer], rows: NDArray[np.uint8]) -> NDArray[np.uint8]:

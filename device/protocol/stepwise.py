@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 from typing import Final
 
 import numpy as np
+from footnav.device.protocol.sequence import CounterTracker
 from numpy.typing import NDArray
 
 PAYLOAD_LEN: Final = 58
@@ -161,7 +162,12 @@ class StepwiseTracker:
     """Accumulates SWDR packets into a track with covariance; resends are applied once.
 
     Call :meth:`update` with every packet received (resends too: the caller ACKs all of them);
-    a package number at or behind the last applied one (modulo 2**16) is ignored.
+    a package number at or behind the last applied one (modulo 2**16) is ignored. A number is
+    believed only in its run (:class:`footnav.device.protocol.sequence.CounterTracker`, lossless: the
+    unit sends in order): one that jumps is held until the next packets continue from it, and
+    rejected, in :attr:`corrupt_numbers`, when they continue the run instead, so a corrupt number
+    that passed the checksum neither applies a step out of place nor makes the next steps look
+    like resends (the unit resends the real packet, which it was not ACKed for).
     """
 
     min_step_m: float = MIN_STEP_M
@@ -175,6 +181,13 @@ class StepwiseTracker:
     repeats_ignored: int = 0
     """Packets whose number was already applied (resends)."""
     _last: int | None = None
+    _numbers: CounterTracker = field(default_factory=lambda: CounterTracker(far_ahead=1))
+    _held: list[bytes] = field(default_factory=list)
+
+    @property
+    def corrupt_numbers(self) -> int:
+        """Packets rejected because their number left the run."""
+        return self._numbers.corrupt_numbers
 
     def update(self, numbers: NDArray[np.integer] | list[int], payloads: bytes, host_ns: int = 0) -> StepBatch | None:
         """Apply the new packets among ``numbers`` (n,) / ``payloads`` (n × 58 bytes), in order.
@@ -185,26 +198,25 @@ class StepwiseTracker:
             The applied packets, or None if all were repeats.
         """
         raw = np.asarray(numbers, dtype=np.int64)
-        arrays = decode_payloads(payloads)
-        keep: list[int] = []
+        decode_payloads(payloads)  # validates the length
+        rows = self._held + [bytes(payloads[k * PAYLOAD_LEN : (k + 1) * PAYLOAD_LEN]) for k in range(raw.size)]
+        repeats = self._numbers.duplicates
+        tracked = self._numbers.track(raw)
+        self._held = [rows[i] for i in tracked.held.tolist()]
+        self.repeats_ignored += self._numbers.duplicates - repeats
+        keep: list[bytes] = []
         counters: list[int] = []
-        last = self._last
-        for i, num in enumerate(raw.tolist()):
-            if last is None:
-                total = num
-            else:
-                delta = (num - last + 0x8000) % 0x10000 - 0x8000
-                if delta <= 0:
-                    self.repeats_ignored += 1
-                    continue
-                total = last + delta
-            keep.append(i)
+        for i, total in zip(tracked.positions.tolist(), tracked.counter.tolist(), strict=True):
+            if self._last is not None and total <= self._last:  # late: the track went on past it
+                self.repeats_ignored += 1
+                continue
+            keep.append(rows[i])
             counters.append(total)
-            last = total
-        self._last = last
+            self._last = total
         if not keep:
             return None
-        idx = np.asarray(keep)
+        arrays = decode_payloads(b"".join(keep))
+        idx = np.arange(len(keep))
         dx, dpsi, q = arrays.dx_m[idx], arrays.dheading_rad[idx], arrays.cov_4x4[idx]
         n = idx.size
         pos = np.empty((n, 3))

@@ -10,8 +10,12 @@ The faults are independent per packet, in this order: drop (p_drop); else duplic
 follows at once); else hold back behind the next packet (p_reorder, a swap with its successor); then
 each bit of each copy is flipped with probability ``bit_error_rate`` (a binary symmetric channel).
 A single flipped bit always breaks the packet's 16-bit additive checksum (it changes the sum by
-±2^k, k < 8), so every corrupted packet is detectable; two or more flips in one packet can in
-principle cancel, which the log records as ``corrupted`` all the same.
+±2^k, k < 8); two flips of the same bit position in two bytes, one up and one down, cancel, so a
+corrupted packet can pass the checksum (about 0.5 % of the corrupted packets at a bit error rate of
+1e-3, see ``benchmarks/integrity.py``). The log records every corrupted copy all the same.
+``renumber`` gives chosen packets another number with a checksum that matches (the worst case of a
+cancelling pair, made on purpose). :meth:`FaultInjector.apply_frames` returns the frames as cut
+before the bit errors, so the transport can put garbage between them even where a flip hit a header.
 """
 
 from __future__ import annotations
@@ -37,12 +41,16 @@ class WireFaults:
         probability that a data packet is sent twice in a row.
     reorder_rate
         probability that a data packet is sent after the one that follows it.
+    renumber
+        ``(number, sent_as)`` pairs: the packet numbered ``number`` goes out numbered ``sent_as``
+        (uint16), its checksum made to match; its first sending only (a lossless resend is clean).
     """
 
     bit_error_rate: float = 0.0
     drop_rate: float = 0.0
     duplicate_rate: float = 0.0
     reorder_rate: float = 0.0
+    renumber: tuple[tuple[int, int], ...] = ()
 
     def __post_init__(self) -> None:
         for name in ("bit_error_rate", "drop_rate", "duplicate_rate", "reorder_rate"):
@@ -52,7 +60,7 @@ class WireFaults:
 
     @property
     def any(self) -> bool:
-        return any((self.bit_error_rate, self.drop_rate, self.duplicate_rate, self.reorder_rate))
+        return any((self.bit_error_rate, self.drop_rate, self.duplicate_rate, self.reorder_rate, self.renumber))
 
 
 @dataclass(slots=True)
@@ -67,6 +75,10 @@ class FaultLog:
     corrupted: list[int] = field(default_factory=list)
     """Numbers of packets with at least one flipped bit (each corrupted copy once)."""
     bits_flipped: int = 0
+    renumbered: list[int] = field(default_factory=list)
+    """Numbers of packets sent with another number (``WireFaults.renumber``)."""
+    undetected: list[int] = field(default_factory=list)
+    """Numbers of corrupted copies whose checksum still matches (what the 16-bit sum misses)."""
 
 
 def split_frames(data: bytes) -> list[bytes]:
@@ -110,6 +122,7 @@ class FaultInjector:
         self.log = FaultLog()
         self._rng = np.random.default_rng(seed)
         self._held: bytes | None = None
+        self._renumber = dict(faults.renumber)
 
     def apply(self, chunk: bytes) -> tuple[bytes, int]:
         """The bytes to send for one firmware output chunk, and the number of data packets in them.
@@ -117,15 +130,24 @@ class FaultInjector:
         A packet held back for reordering at the end of a chunk goes out after the first packet of
         the next chunk (or at :meth:`flush`).
         """
+        frames, n_data = self.apply_frames(chunk)
+        return b"".join(f for f, _ in frames), n_data
+
+    def apply_frames(self, chunk: bytes) -> tuple[list[tuple[bytes, bool]], int]:
+        """As :meth:`apply`, the frames kept apart: ``(bytes, is_data_packet)`` each, in wire order."""
         f, rng, log = self.faults, self._rng, self.log
-        out: list[bytes] = []
+        out: list[tuple[bytes, bool]] = []
         sent_before = len(log.dropped), len(log.duplicated), log.packets_in, self._held is not None
-        for frame in split_frames(chunk):
-            if frame[0] != _DATA:
-                out.append(frame)
+        for made in split_frames(chunk):
+            if made[0] != _DATA:
+                out.append((made, False))
                 continue
             log.packets_in += 1
-            number = frame[1] << 8 | frame[2]
+            number = made[1] << 8 | made[2]
+            frame = made
+            if number in self._renumber:  # once: a lossless resend goes out as it should
+                frame = _renumbered(made, self._renumber.pop(number))
+                log.renumbered.append(number)
             if f.drop_rate and rng.random() < f.drop_rate:
                 log.dropped.append(number)
                 continue
@@ -135,15 +157,15 @@ class FaultInjector:
                 copies.append(frame)
             copies = [self._flip_bits(c, number) for c in copies]
             if self._held is not None:  # the held packet follows this one
-                out.extend(copies)
-                out.append(self._held)
+                out.extend((c, True) for c in copies)
+                out.append((self._held, True))
                 self._held = None
                 continue
             if f.reorder_rate and len(copies) == 1 and rng.random() < f.reorder_rate:
                 log.reordered.append(number)
                 self._held = copies[0]
                 continue
-            out.extend(copies)
+            out.extend((c, True) for c in copies)
         dropped, duplicated, packets_in, held_before = sent_before
         n_data = (
             (log.packets_in - packets_in)
@@ -152,7 +174,7 @@ class FaultInjector:
             + int(held_before)
             - int(self._held is not None)
         )
-        return b"".join(out), n_data
+        return out, n_data
 
     def flush(self) -> bytes:
         """A packet still held back for reordering (the stream ended after it), else b""."""
@@ -173,4 +195,15 @@ class FaultInjector:
             buf[bit >> 3] ^= 1 << (bit & 7)
         self.log.corrupted.append(number)
         self.log.bits_flipped += flips
+        if sum(buf[:-2]) & 0xFFFF == (buf[-2] << 8 | buf[-1]):
+            self.log.undetected.append(number)
         return bytes(buf)
+
+
+def _renumbered(frame: bytes, number: int) -> bytes:
+    """``frame`` numbered ``number`` (uint16), its checksum recomputed."""
+    buf = bytearray(frame)
+    buf[1], buf[2] = (number >> 8) & 0xFF, number & 0xFF
+    chk = sum(buf[:-2]) & 0xFFFF
+    buf[-2], buf[-1] = chk >> 8, chk & 0xFF
+    return bytes(buf)

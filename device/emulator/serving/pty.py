@@ -289,7 +289,7 @@ class PtyShoeServer:
             if not pending and fw.exhausted and self._injector is not None:
                 held = self._injector.flush()
                 if held:
-                    fw.out.append((held, 1))
+                    fw.out.append((held, -1))  # already through the injector
                     pending = True
             if not pending and fw.exhausted and not self.finished.is_set():
                 self.finished.set()
@@ -337,15 +337,23 @@ class PtyShoeServer:
 
     def _on_the_wire(self, data: bytes, count: int) -> tuple[bytes, int]:
         """A firmware chunk as it goes out: through the fault injector, with garbage between packets."""
-        if self._injector is not None and count:
-            data, count = self._injector.apply(data)
+        if count < 0:  # a packet the injector held back, flushed at the end: already through it
+            return data, 1
         every = self._garbage_every
-        if every is None or count == 0:
+        if self._injector is not None and count:
+            if every is None:
+                return self._injector.apply(data)
+            frames, count = self._injector.apply_frames(data)  # cut before any header byte was hit
+        elif every is None or count == 0:
             return data, count
+        else:
+            frames = [(frame, frame[0] == 0xAA) for frame in split_frames(data)]
+        if every is None or count == 0:
+            return b"".join(frame for frame, _ in frames), count
         parts: list[bytes] = []
-        for frame in split_frames(data):
+        for frame, is_data in frames:
             parts.append(frame)
-            if frame[0] != 0xAA:
+            if not is_data:
                 continue
             self._packets_since_garbage += 1
             if self._packets_since_garbage >= every:
