@@ -33,6 +33,7 @@ def _export(args: argparse.Namespace) -> int:
             smooth=args.smooth,
             stance_levels=args.stance_levels,
             steps_out=args.steps,
+            gait_out=args.gait,
         )
     )
     return 0
@@ -42,10 +43,14 @@ def _evaluate(args: argparse.Namespace) -> int:
     from footnav.app.commands.evaluate import format_table, run_evaluate
 
     rows, problems = run_evaluate(args.paths, smooth=args.smooth, stance_levels=args.stance_levels)
-    print(format_table(rows))
+    if rows:
+        print(format_table(rows))
     for problem in problems:
         print(f"footnav: skipped: {problem}", file=sys.stderr)
-    return 0 if rows else 2
+    if not rows:
+        files = "the recording" if len(problems) == 1 else f"none of the {len(problems)} recordings"
+        raise FootnavError(f"nothing evaluated: {files} could be measured (the lines above say why)")
+    return 0
 
 
 def _config(args: argparse.Namespace) -> Config:
@@ -97,6 +102,8 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
             stance=args.stance,
             dual_imu_lever_b_m=(_lever(args.lever_arm) or DEFAULT_LEVER_B_M) if args.dual_imu else None,
             fused_imu_mask=args.imu_mask if args.mode == "raw" else None,
+            output=args.mode,
+            model=args.unit,
         )
     )
 
@@ -286,6 +293,10 @@ def main(argv: list[str] | None = None) -> int:
         "experiment": _experiment,
     }
     try:
+        if getattr(args, "save", None) is not None:  # before anything starts (demo, live, replay)
+            from footnav.views.outputs import check_save_destination
+
+            check_save_destination(args.save)
         return commands[args.command](args)
     except FootnavError as exc:
         print(f"footnav: error: {exc}", file=sys.stderr)

@@ -306,6 +306,8 @@ def load_config(path: Path | None = None, *, cwd: Path | None = None) -> Config:
         raise ConfigError(f"cannot read the configuration file {file}: {exc.strerror or exc}") from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{file} is not valid TOML: {exc}") from exc
+    except UnicodeDecodeError:
+        raise ConfigError(f"{file} is not a text file; expected a TOML configuration file") from None
     _apply_table(cfg, data, f"file {file}", str(file))
     cfg.tof_config()  # one lever arm per viewing direction, none of them zero
     cfg.file = file

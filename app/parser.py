@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from footnav.app.choices import AXIS_ERRORS, IMU_GRADES, PATHS, PROFILES, RECORDING_FORMATS
+from footnav.app.choices import AXIS_ERRORS, IMU_GRADES, PATHS, PROFILES, RECORDING_FORMATS, UNIT_MODELS
 
 if TYPE_CHECKING:
     from typing import TypeAlias
@@ -17,23 +17,93 @@ if TYPE_CHECKING:
     Options: TypeAlias = argparse._ActionsContainer  # a parser or an argument group
 
 
+WALKING_SPEED_MPS = (1.2, 1.8)
+"""Walking speeds the emulator's gait model covers, m/s (``footnav.device.emulator.motion.gait.SPEED_RANGE_MPS``:
+the parser imports no numerics, a test checks the two agree)."""
+MAX_DEMO_DURATION_S = 3600.0
+"""The longest demo walk, s: the demo computes the whole walk and its sensor signals before it starts (about
+70 MB of memory a minute per foot), so an hour already takes some 4 GB a foot."""
+MAX_IMU_MASK = 0x0F
+"""The raw output's IMU mask covers the four IMUs of the largest supported board (``footnav.device.models``)."""
+
+
+# Every argument type raises ``ArgumentTypeError`` with what it expected, so that argparse says
+# "argument --speed: expected a positive number, got 'abc'" and never the function's name.
+def _number(text: str, expected: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
+
+
 def _positive(text: str) -> float:
-    value = float(text)
+    value = _number(text, "a positive number")
     if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
+
+
+def _finite(text: str) -> float:
+    value = _number(text, "a number")
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
     return value
 
 
 def _pace(text: str) -> float:
     if text == "max":
         return math.inf
-    return _positive(text.rstrip("x"))
+    value = _number(text.removesuffix("x"), "1x, Nx (N > 0) or max")
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected 1x, Nx (N > 0) or max, got {text!r}")
+    return value
 
 
 def _seconds(text: str) -> float:
-    value = float(text)
+    value = _number(text, "a time in seconds, >= 0")
     if not value >= 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+        raise argparse.ArgumentTypeError(f"expected a time in seconds, >= 0, got {text!r}")
+    return value
+
+
+def _walking_speed(text: str) -> float:
+    lo, hi = WALKING_SPEED_MPS
+    expected = f"a walking speed from {lo} to {hi} m/s (what the emulated gait covers)"
+    value = _number(text, expected)
+    if not lo <= value <= hi:
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
+    return value
+
+
+def _demo_duration(text: str) -> float:
+    expected = (
+        f"a duration over 0 and at most {MAX_DEMO_DURATION_S:.0f} s (the demo computes the whole walk in "
+        "memory before it starts, about 70 MB a minute per foot)"
+    )
+    value = _number(text, expected)
+    if not 0 < value <= MAX_DEMO_DURATION_S:
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
+    return value
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value < 2**32:
+        raise argparse.ArgumentTypeError(f"expected a whole number from 0 to 2**32 - 1, got {text!r}")
+    return value
+
+
+def _imu_mask(text: str) -> int:
+    expected = f"an IMU mask from 0x01 to 0x{MAX_IMU_MASK:02X}, e.g. 0x0F (one bit per IMU)"
+    try:
+        value = int(text, 0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
+    if not 0 < value <= MAX_IMU_MASK:
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
     return value
 
 
@@ -72,7 +142,7 @@ def _add_step_smoothing_arg(p: argparse.ArgumentParser) -> None:
 def _add_lever_arm_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--lever-arm",
-        type=float,
+        type=_finite,
         nargs=3,
         default=None,
         metavar=("X", "Y", "Z"),
@@ -111,10 +181,14 @@ def _add_demo_command(sub: Commands) -> None:
     demo = sub.add_parser("demo", help="run everything against the built-in emulated shoe (no hardware)")
     demo.add_argument("--path", choices=PATHS, default="rectangle", help="walking path (default: rectangle, 18 × 9 m)")
     demo.add_argument(
-        "--duration", type=_positive, default=60.0, metavar="S", help="walk duration in seconds (default 60)"
+        "--duration",
+        type=_demo_duration,
+        default=60.0,
+        metavar="S",
+        help=f"walk duration in seconds, at most {MAX_DEMO_DURATION_S:.0f} (default 60)",
     )
     demo.add_argument(
-        "--speed", type=_positive, default=1.4, metavar="M/S", help="walking speed, 1.2-1.8 m/s (default 1.4)"
+        "--speed", type=_walking_speed, default=1.4, metavar="M/S", help="walking speed, 1.2-1.8 m/s (default 1.4)"
     )
     demo.add_argument(
         "--grade",
@@ -136,7 +210,7 @@ def _add_demo_command(sub: Commands) -> None:
     _add_stance_arg(demo, default="inertial")
     demo.add_argument("--feet", type=int, choices=(1, 2), default=1, help="emulated shoes: 1, or 2 (left and right)")
     demo.add_argument("--pace", type=_pace, default=1.0, metavar="1x|Nx|max", help="emulator speed (default real time)")
-    demo.add_argument("--seed", type=int, default=1, help="random seed of the emulated sensor errors")
+    demo.add_argument("--seed", type=_seed, default=1, help="random seed of the emulated sensor errors")
     demo.add_argument(
         "--miscalibrated",
         action="store_true",
@@ -151,7 +225,7 @@ def _add_demo_command(sub: Commands) -> None:
     _add_lever_arm_arg(demo)
     demo.add_argument(
         "--board-lever-arm",
-        type=float,
+        type=_finite,
         nargs=3,
         default=None,
         metavar=("X", "Y", "Z"),
@@ -189,15 +263,24 @@ def _add_live_command(sub: Commands) -> None:
         help="a dual-IMU board: stream both IMUs (raw output 0x28, mask 0b11) to the dual-IMU filter",
     )
     live.add_argument(
+        "--unit",
+        choices=UNIT_MODELS,
+        metavar="MODEL",
+        help=f"the unit's model: {', '.join(UNIT_MODELS)} (sets its base rate and the modes it offers; "
+        "default: a 1 kHz unit, its firmware probed)",
+    )
+    live.add_argument(
         "--mode",
-        choices=("imu", "raw"),
-        default="imu",
-        help="imu: the unit's calibrated IMU output 0x40 (default); raw: the raw registers 0x28 of the IMUs "
-        "in --imu-mask, averaged into one IMU as the unit's own array firmware does",
+        choices=("auto", "imu", "raw", "ins", "steps"),
+        default="auto",
+        help="imu: the unit's calibrated IMU output 0x40, navigated by footnav; raw: the raw registers 0x28 "
+        "of the IMUs in --imu-mask, averaged into one IMU as the unit's own array firmware does; ins: the "
+        "unit's own INS states and covariance; steps: the unit's stepwise dead reckoning, a step and its "
+        "covariance per packet; auto (default): the best the unit offers (imu; steps on 2014 firmware)",
     )
     live.add_argument(
         "--imu-mask",
-        type=lambda t: int(t, 0),
+        type=_imu_mask,
         default=0x0F,
         metavar="MASK",
         help="with --mode raw: the IMUs to stream and average (default 0x0F: the four of a MIMU board)",
@@ -235,7 +318,7 @@ def _add_calibrate_command(sub: Commands) -> None:
         "--demo", action="store_true", help="an emulated miscalibrated unit that turns through the faces by itself"
     )
     cal.add_argument(
-        "--imu-mask", type=lambda t: int(t, 0), default=0x0F, metavar="MASK",
+        "--imu-mask", type=_imu_mask, default=0x0F, metavar="MASK",
         help="IMUs whose raw outputs are averaged (default 0x0F: the four of a MIMU board)",
     )  # fmt: skip
     cal.add_argument(
@@ -313,6 +396,13 @@ def _add_export_command(sub: Commands) -> None:
         metavar="STEPS.csv",
         help="also write one row per step: displacement, heading change and their covariance (OpenShoe's "
         "stepwise output), length, duration, clearance",
+    )
+    export.add_argument(
+        "--gait",
+        type=Path,
+        metavar="GAIT.csv",
+        help="also write one row per stride of the gait parameters (length, duration, cadence, speed, stance and "
+        "swing, turning, lateral deviation, clearance) and print their mean, SD and CV",
     )
     _add_recording_args(export)
 

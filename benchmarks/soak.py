@@ -43,6 +43,8 @@ if TYPE_CHECKING:
 
 ROOT = Path(__file__).resolve().parents[1]
 FEET = ("left", "right")
+STOPPED_CODES = (0, 130)
+"""footnav's exit codes for a session stopped by SIGINT: 130, the shell's code for Ctrl-C (0 before issue 28)."""
 
 
 def _serve(seconds: float, pace: float, drop_rate: float, bit_error_rate: float) -> int:
@@ -130,7 +132,8 @@ class SoakResult:
 
     @property
     def ok(self) -> bool:
-        return self.footnav_code == 0 and all(f["capture_equals_sent"] and f["accounted"] for f in self.feet.values())
+        captured = all(f["capture_equals_sent"] and f["accounted"] for f in self.feet.values())
+        return self.footnav_code in STOPPED_CODES and captured
 
 
 def _only_acks(data: bytes) -> bool:

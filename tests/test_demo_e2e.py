@@ -156,9 +156,15 @@ def test_realtime_pace_and_interrupt(tmp_path: Path) -> None:
     started = time.monotonic()
     time.sleep(3)
     proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 0, err
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err  # the shell's code for Ctrl-C
     assert "Traceback" not in err and "interrupted" in err, err
+    # the summary is of the walk up to where it stopped, not of the whole planned walk (about 35 m)
+    assert "(ground truth, up to the last sample navigated)" in out, out
+    walked = float(re.search(r"distance walked:\s+([\d.]+) m", out)[1])  # type: ignore[index]
+    assert walked < 20.0
+    if walked > 1.0:
+        assert float(re.search(r"= ([\d.]+) % of distance", out)[1]) < 5.0  # type: ignore[index]
     store = RrdReader(path).stream().collect()
     n = store.reader(index="imu_time", contents=["/plots/stance/foot"]).to_arrow_table().num_rows
     walked_s = time.monotonic() - started + 5  # generous: data flowing before `started`

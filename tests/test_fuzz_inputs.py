@@ -12,10 +12,13 @@ Briefly in the suite; at length on demand::
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import io
+import json
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -198,3 +201,122 @@ def test_mutated_capture_reads_a_prefix_or_names_what_it_expected(data: st.DataO
             assert "capture" in str(exc) or "MCAP" in str(exc) or "mcap" in str(exc)
             return
         assert len(items) <= 1 + 30 + 1
+
+
+# ------------------------------------------------------------------ capture metadata (the header's settings)
+
+
+def rewrite_capture(src: Path, dst: Path, edit: Callable[[str, dict[str, str]], dict[str, str]]) -> None:
+    """Copy the capture ``src`` to ``dst`` record by record, each metadata record (``footnav.session``,
+    ``footnav.unit``) replaced by ``edit(name, metadata)``; the data is unchanged."""
+    from mcap.records import Channel, Header, Message, Metadata
+    from mcap.stream_reader import StreamReader
+    from mcap.writer import Writer
+
+    channels: dict[int, int] = {}
+    with src.open("rb") as f, dst.open("wb") as out:
+        writer = Writer(out)
+        for rec in StreamReader(f).records:
+            if isinstance(rec, Header):
+                writer.start(profile=rec.profile, library=rec.library)
+            elif isinstance(rec, Metadata):
+                writer.add_metadata(rec.name, edit(rec.name, dict(rec.metadata)))
+            elif isinstance(rec, Channel):
+                channels[rec.id] = writer.register_channel(rec.topic, rec.message_encoding, 0, dict(rec.metadata))
+            elif isinstance(rec, Message):
+                writer.add_message(channels[rec.channel_id], rec.log_time, rec.data, rec.publish_time, rec.sequence)
+        writer.finish()
+
+
+@functools.cache
+def demo_capture() -> bytes:
+    """A real capture: a 3-s demo walk through the emulated unit, the serial path and the pipeline."""
+    from footnav.app.cli import main
+
+    with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
+        with contextlib.redirect_stderr(io.StringIO()) as err:
+            code = main(["demo", "--duration", "3", "--pace", "max", "--no-viewer", "--sessions", tmp])
+        assert code == 0, err.getvalue()
+        (path,) = Path(tmp).glob("*.mcap")
+        return path.read_bytes()
+
+
+ANY_JSON = st.recursive(
+    st.none()
+    | st.booleans()
+    | st.integers(-(2**70), 2**70)
+    | st.sampled_from([0, 1, -1, 15, 16, 2**31, 14, 1000])
+    | st.floats(allow_nan=True, allow_infinity=True)
+    | st.text(max_size=12)
+    | st.sampled_from(["normal_imu", "dual_imu_raw", "raw_imu_fused", "calibration_raw_imu", "ins", "steps", "or"]),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner, max_size=3),
+    max_leaves=8,
+)
+"""Values of every JSON type, and the names and numbers the settings really hold."""
+EXTRA_SETTINGS = ("dual_imu_lever_b_m", "fused_imu_mask", "imu_mask", "model", "ins_state_ids")
+"""Settings a demo capture does not record but others do (dual-IMU board, raw IMUs, calibration, models)."""
+
+
+def _settings_paths(settings: dict[str, object], prefix: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
+    """Every key of the settings, nested ones (``nav_config.filter.align_s``) included."""
+    paths = []
+    for key, value in settings.items():
+        paths.append((*prefix, key))
+        if isinstance(value, dict):
+            paths.extend(_settings_paths(value, (*prefix, key)))
+    return paths
+
+
+def _cli(*args: str) -> tuple[int, str]:
+    """Run the command line in this process; (exit code, stderr). An exception other than the exits
+    the CLI makes itself fails the test, with its traceback."""
+    from footnav.app.cli import main
+
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()) as err:
+        try:
+            code = main(list(args))
+        except SystemExit as exc:  # argparse
+            code = exc.code if isinstance(exc.code, int) else 2
+    return code, err.getvalue()
+
+
+@FUZZ
+@given(data=st.data())
+def test_mutated_capture_settings_replay_or_say_which_value_is_wrong(data: st.DataObject) -> None:
+    """Every recorded setting, nested navigator settings too, the foot name and the session record,
+    replaced by a value of another type or out of range: replay and export work, or refuse the capture
+    in one line; never a traceback."""
+    seed = demo_capture()
+    with tempfile.TemporaryDirectory() as tmp:
+        src, dst = Path(tmp) / "seed.mcap", Path(tmp) / "mutated.mcap"
+        src.write_bytes(seed)
+        target = data.draw(st.sampled_from(["settings", "session", "foot"]), label="target")
+        value = data.draw(ANY_JSON, label="value")
+
+        def edit(name: str, md: dict[str, str]) -> dict[str, str]:
+            if name == "footnav.session" and target == "session":
+                key = data.draw(st.sampled_from(sorted(md)), label="session key")
+                return {**md, key: data.draw(st.text(max_size=24) | st.just(str(value)), label="session value")}
+            if name != "footnav.unit" or target == "session":
+                return md
+            if target == "foot":
+                return {**md, "foot": data.draw(st.text(max_size=12) | st.just("../../../x"), label="foot")}
+            settings = json.loads(md["settings"])
+            paths = _settings_paths(settings) + [(k,) for k in EXTRA_SETTINGS]
+            path = data.draw(st.sampled_from(paths), label="setting")
+            table = settings
+            for key in path[:-1]:
+                table = table[key]
+            table[path[-1]] = value
+            return {**md, "settings": json.dumps(settings)}
+
+        rewrite_capture(src, dst, edit)
+        if data.draw(st.booleans(), label="replay"):
+            code, err = _cli("replay", str(dst), "--no-viewer")
+        else:
+            code, err = _cli("export", str(dst), "-o", str(Path(tmp) / "track.csv"))
+        assert "Traceback" not in err
+        assert code in (0, 2), err
+        if code == 2:
+            assert len([line for line in err.splitlines() if line.startswith("footnav: error:")]) == 1, err
+        assert sorted(p.name for p in Path(tmp).iterdir()) <= ["mutated.mcap", "seed.mcap", "track.csv"]

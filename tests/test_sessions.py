@@ -174,13 +174,15 @@ def test_web_viewer_on_loopback_and_a_dying_viewer(tmp_path: Path) -> None:
     assert n.to_arrow_table().num_rows == len(nav)
 
 
-def test_unwritable_recording_path_lets_the_session_carry_on(tmp_path: Path) -> None:
+def test_unwritable_recording_path_is_refused_before_the_session_starts(tmp_path: Path) -> None:
+    """``--save`` names a file that was asked for: one that cannot be written is an error, as for
+    ``export -o``, before anything starts (issue 28)."""
     proc = _footnav("demo", "--duration", "8", "--pace", "max", "--save", "/proc/footnav-test.rrd",
                     "--sessions", str(tmp_path))  # fmt: skip
-    assert proc.returncode == 0, proc.stderr
-    assert "cannot write the recording to /proc/footnav-test.rrd" in proc.stderr
-    assert "samples navigated: 8000 of 8000" in proc.stdout
-    assert len(list(tmp_path.glob("*.mcap"))) == 1  # the capture is still written
+    assert proc.returncode == 2, proc.stderr
+    assert "footnav: error: cannot write the recording to /proc/footnav-test.rrd" in proc.stderr
+    assert "samples navigated" not in proc.stdout
+    assert list(tmp_path.glob("*.mcap")) == []  # nothing started, nothing captured
 
 
 @pytest.mark.skipif(

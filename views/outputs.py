@@ -9,6 +9,7 @@ session and its capture carry on. The outputs merge into one recording wherever 
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import subprocess
 import threading
@@ -20,6 +21,7 @@ from typing import Any
 
 import numpy as np
 import rerun as rr
+from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.nav_types import ClearanceSeries, NavBatch
 from footnav.views.dual_imu import DualRunView
 from footnav.views.logger import FILE_FLUSH_PERIOD_S, FLUSH_PERIOD_S, RerunLogger
@@ -175,6 +177,36 @@ class SessionViews:
         return max(o.logger.stats.samples_dropped for o in self.outputs)
 
 
+def check_save_destination(path: Path) -> None:
+    """Make sure a recording can be written at ``path`` (``--save``), before a session starts; the
+    probe leaves nothing behind (a file or folders it had to create are removed again).
+
+    Raises
+    ------
+    FootnavError
+        ``path`` is a folder, or the file cannot be created or written (the message says why).
+    """
+    if path.is_dir():
+        raise FootnavError(f"cannot write the recording to {path}: it is a folder; give a file name, e.g. walk.rrd")
+    existed = path.exists()
+    created: list[Path] = []
+    try:
+        missing = [d for d in path.parents if not d.exists()]
+        for folder in reversed(missing):
+            folder.mkdir()
+            created.append(folder)
+        with open(path, "ab"):
+            pass
+        if not existed:
+            path.unlink()
+    except OSError as exc:
+        raise FootnavError(f"cannot write the recording to {path}: {exc.strerror or exc}") from None
+    finally:
+        for folder in reversed(created):
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+
+
 def open_session_views(
     *,
     save: Path | None,
@@ -200,8 +232,9 @@ def open_session_views(
 
     - ``web``: host the web viewer on 127.0.0.1 and stream to it (its URL is in the notes);
     - else, a viewer wanted and a display present: spawn the native viewer (127.0.0.1);
-    - a viewer wanted but none could start (no display, start-up failure): save to a default file;
-    - ``save``: always also that file. A path that cannot be written is reported and skipped.
+    - a viewer wanted but none could start (no display, start-up failure): save to a default file
+      (reported and skipped if it cannot be written);
+    - ``save``: always also that file.
 
     Returns
     -------
@@ -209,7 +242,14 @@ def open_session_views(
         None when there is no output at all.
     notes : list[str]
         The notes describing the outputs (the web viewer's URL is in them).
+
+    Raises
+    ------
+    FootnavError
+        ``save`` cannot be written (:func:`check_save_destination`); nothing was started.
     """
+    if save is not None:
+        check_save_destination(save)
     outputs: list[Output] = []
     notes: list[str] = []
 

@@ -1,8 +1,9 @@
 """The viewer's stride table: per foot, each stride between consecutive footfalls (step onsets, as
-``NavBatch.step_onsets`` marks them) with its length (horizontal distance between the two
-footfalls), duration, speed (length / duration) and peak clearance (largest ``clearance_m`` between
-them), the last :data:`SHOWN_STRIDES` of them and the means of all, as a Markdown document. An onset
-within :data:`MIN_STRIDE_S` of the last footfall belongs to the same stance.
+``NavBatch.step_onsets`` marks them) with its length, duration, speed and peak clearance, the gait
+parameters of ``footnav.pipeline.gait.parameters`` (there the length runs between the stances' middles;
+live, at the footfall that ends a stride, between the footfalls), the last :data:`SHOWN_STRIDES` of them
+and the means of all, as a Markdown document. An onset within ``MIN_STRIDE_S`` of the last footfall
+belongs to the same stance; a stride over ``MAX_STRIDE_S`` (a pause) or of under 5 cm is no stride.
 """
 
 from __future__ import annotations
@@ -10,12 +11,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from footnav.pipeline.gait.parameters import MAX_STRIDE_S, MIN_STRIDE_S, stride_parameters
 from footnav.pipeline.nav_types import NavBatch
+from numpy.typing import NDArray
 
 SHOWN_STRIDES = 8
-MIN_STRIDE_S = 0.25
-"""A footfall this soon after the last one is the detector's flicker within one stance, not a stride
-(running strides last about 0.6 s and more)."""
+_Samples = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]
+"""Times, positions, attitudes, stance flags and clearances of consecutive samples."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -36,8 +38,10 @@ class Stride:
 class _Foot:
     strides: list[Stride] = field(default_factory=list)
     last_t_s: float | None = None
-    last_xy_m: tuple[float, float] = (0.0, 0.0)
-    peak_m: float = float("-inf")
+    since: list[_Samples] = field(default_factory=list)
+    """The samples from the last footfall on, while ``open``."""
+    open: bool = False
+    """A stride runs from the last footfall (not once it spans more than ``MAX_STRIDE_S``)."""
 
 
 class StrideTable:
@@ -52,21 +56,31 @@ class StrideTable:
         onsets = nav.step_onsets if nav.step_onsets is not None else np.zeros(0, dtype=np.intp)
         start = 0
         added = False
-        for k in (*onsets.tolist(), len(nav)):
-            if k > start:
-                state.peak_m = max(state.peak_m, float(np.nanmax(nav.clearance_m[start:k], initial=-np.inf)))
-            if k == len(nav):
-                break
-            t, xy = float(nav.t_s[k]), (float(nav.pos_n_m[k, 0]), float(nav.pos_n_m[k, 1]))
+        for k in onsets.tolist():
+            t = float(nav.t_s[k])
             if state.last_t_s is not None and t - state.last_t_s < MIN_STRIDE_S:
                 continue
-            if state.last_t_s is not None:
-                length = float(np.hypot(xy[0] - state.last_xy_m[0], xy[1] - state.last_xy_m[1]))
-                state.strides.append(Stride(t, length, t - state.last_t_s, state.peak_m))
-                added = True
-            state.last_t_s, state.last_xy_m, state.peak_m = t, xy, float("-inf")
-            start = k
+            if state.open:
+                added |= self._add_stride(state, [*state.since, _samples(nav, start, k + 1)])
+            state.last_t_s, state.since, state.open, start = t, [], True, k
+        if state.open and state.last_t_s is not None:
+            state.since.append(_samples(nav, start, len(nav)))
+            if float(nav.t_s[-1]) - state.last_t_s > MAX_STRIDE_S:
+                state.since, state.open = [], False  # a pause: the next footfall starts the next stride
         return added
+
+    @staticmethod
+    def _add_stride(state: _Foot, parts: list[_Samples]) -> bool:
+        """The stride of the samples, from the first (a footfall) to the last (the next)."""
+        t, pos, quat, stance, clearance = (np.concatenate(arrays) for arrays in zip(*parts, strict=True))
+        falls = np.array([0, t.size - 1], dtype=np.intp)
+        s = stride_parameters(t, pos, quat, stance, clearance, falls=falls, at="footfall")
+        if not len(s):
+            return False
+        state.strides.append(
+            Stride(float(s.end_s[0]), float(s.length_m[0]), float(s.duration_s[0]), float(s.max_clearance_m[0]))
+        )
+        return True
 
     def markdown(self) -> str:
         """The table of every foot: its last strides and the means of all of them."""
@@ -94,6 +108,11 @@ class StrideTable:
             lines.append(_row("**mean**", mean))
             parts.append("\n".join(lines))
         return "\n\n".join(parts) if parts else "No stride yet: a stride ends at the second footfall."
+
+
+def _samples(nav: NavBatch, a: int, b: int) -> _Samples:
+    """Samples [a, b) of ``nav``: the arrays of a stride's parameters."""
+    return (nav.t_s[a:b], nav.pos_n_m[a:b], nav.quat_nb_wxyz[a:b], nav.stance[a:b], nav.clearance_m[a:b])
 
 
 def _row(label: str, s: Stride) -> str:

@@ -298,7 +298,7 @@ async def calibrate_session(opts: CalibrateOptions) -> CalibrateResult:
                 opts.config, session_id, enabled=opts.capture, extra={"command": "footnav calibrate"}
             )
             if capture is not None:
-                stack.callback(capture.close)
+                stack.callback(_close_capture, capture, result)
                 tap = capture.add_unit(
                     calibration_header(str(address), transport, opts.imu_mask, opts.rate_divider_log2 or 0)
                 )
@@ -331,6 +331,15 @@ async def calibrate_session(opts: CalibrateOptions) -> CalibrateResult:
     result.path = save_calibration(folder, result.mcu_id, result.calibration, source=source, stream=stream)
     _say(opts, f"saved {result.path}: applied whenever this unit connects or its capture is replayed")
     return result
+
+
+def _close_capture(capture: CaptureWriter, result: CalibrateResult) -> None:
+    """Close the capture; one that no unit ever answered (the port could not be opened, the unit was
+    silent) holds nothing worth keeping, so it is removed."""
+    capture.close()
+    if capture.rx_bytes == 0:
+        capture.path.unlink(missing_ok=True)
+        result.capture_path = None
 
 
 def _demo_server(opts: CalibrateOptions) -> tuple[PtyShoeServer, Miscalibration]:

@@ -47,7 +47,7 @@ from footnav.app.session import UnitAddress, run_device_session
 from footnav.app.status import StatusLine, input_handling
 from footnav.app.stream import SerialSessionResult
 from footnav.device.emulator.motion.floors import floor_of
-from footnav.device.emulator.motion.gait import GaitTruth, simulate_walk
+from footnav.device.emulator.motion.gait import SPEED_RANGE_MPS, GaitTruth, simulate_walk, two_feet_walks
 from footnav.device.emulator.scripts import BaroScript, TofScript, baro_from_height
 from footnav.device.emulator.sensors.dual_imu import DEFAULT_LEVER_B_M, rigid_board
 from footnav.device.emulator.sensors.icosahedron import MISCALIBRATED_MCU_ID, miscalibrated_signals, warm_up_c
@@ -59,6 +59,7 @@ from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
 from footnav.pipeline.aiding.tof_types import TofConfig
 from footnav.pipeline.dual_imu.lever_arm import check_lever_arm
 from footnav.pipeline.dual_imu.navigator import DualNavigator
+from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.navigation.navigator import Navigator
 from footnav.pipeline.navigation.profiles import get_profile
 from footnav.pipeline.runner import NavSink
@@ -117,13 +118,25 @@ class DemoOptions:
 
 @dataclass(frozen=True)
 class DemoSummary:
-    """The figures the demo prints at the end."""
+    """The figures the demo prints at the end.
+
+    Attributes
+    ----------
+    distance_m
+        the distance the emulated foot had walked at the last sample navigated, m (the whole walk's
+        unless the demo was interrupted).
+    final_error_m
+        the position error at that sample, m.
+    interrupted
+        the demo was stopped before the end of the walk (the figures are up to where it stopped).
+    """
 
     distance_m: float
     final_error_m: float
     samples_expected: int
     samples_navigated: int
     lost_packets: int
+    interrupted: bool = False
 
     @property
     def error_percent(self) -> float:
@@ -133,26 +146,57 @@ class DemoSummary:
         return [
             f"samples navigated: {self.samples_navigated} of {self.samples_expected} "
             f"(lost packets: {self.lost_packets})",
-            f"distance walked:   {self.distance_m:.2f} m (ground truth)",
-            f"final position error: {self.final_error_m:.3f} m = {self.error_percent:.2f} % of distance",
+            f"distance walked:   {self.distance_m:.2f} m (ground truth"
+            + (", up to the last sample navigated)" if self.interrupted else ")"),
+            f"{'position error there' if self.interrupted else 'final position error'}: {self.final_error_m:.3f} m "
+            + (f"= {self.error_percent:.2f} % of distance" if self.distance_m > 0 else "(no distance walked yet)"),
         ]
 
 
-def summarise(truth: GaitTruth, result: SerialSessionResult, samples_navigated: int) -> DemoSummary | None:
-    """Compare the last estimate with the ground truth of the same sample (matched by packet counter)."""
+def distance_walked_m(truth: GaitTruth, last_index: int) -> float:
+    """How far the emulated foot has walked at sample ``last_index``: foothold to foothold (as
+    ``GaitTruth.distance_m`` counts the whole walk), and mid-swing the straight line from the last
+    foothold to where the foot is."""
+    pos = truth.pos_n_m[: last_index + 1]
+    still = truth.stance[: last_index + 1]
+    if pos.shape[0] == 0:
+        return 0.0
+    footholds = np.flatnonzero(still & ~np.concatenate([[False], still[:-1]]))  # the first sample of each stance
+    points = pos[footholds] if footholds.size else pos[:1]
+    if not still[-1]:
+        points = np.vstack([points, pos[-1:]])
+    return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
+
+
+def summarise(
+    truth: GaitTruth, result: SerialSessionResult, samples_navigated: int, *, interrupted: bool = False
+) -> DemoSummary | None:
+    """Compare the last estimate with the ground truth of the same sample (matched by packet counter),
+    over the distance walked up to that sample."""
     nav = result.last_nav
     if nav is None or result.first_counter is None or result.link is None:
         return None
     # counters run one per sample at the 1 kHz base rate; the demo streams every sample
-    last_index = round(float(nav.t_s[-1]) * truth.rate_hz)
+    last_index = min(round(float(nav.t_s[-1]) * truth.rate_hz), truth.t_s.size - 1)
     error = float(np.linalg.norm(nav.pos_n_m[-1] - truth.pos_n_m[last_index]))
-    return DemoSummary(truth.distance_m, error, truth.t_s.size, samples_navigated, result.link.lost_packets)
+    return DemoSummary(
+        distance_walked_m(truth, last_index),
+        error,
+        truth.t_s.size,
+        samples_navigated,
+        result.link.lost_packets,
+        interrupted=interrupted,
+    )
 
 
 def demo_truth(opts: DemoOptions, foot_index: int) -> tuple[GaitTruth, NDArray[np.float64], NDArray[np.float64]]:
-    """Ground truth and corrupted IMU signals of one emulated foot (the second foot: same walk, own
-    sensor errors)."""
-    truth = simulate_walk(opts.path, opts.duration_s, rate_hz=1000.0, speed_mps=opts.speed_mps, seed=opts.seed)
+    """Ground truth and corrupted IMU signals of one emulated foot; with two feet, foot 0 is the left
+    and foot 1 the right of one walker (``two_feet_walks``: either side of the line, half a stride
+    apart, each its own strides and sensor errors)."""
+    if opts.feet == 2:
+        truth = two_feet_walks(opts.path, opts.duration_s, speed_mps=opts.speed_mps, seed=opts.seed)[foot_index]
+    else:
+        truth = simulate_walk(opts.path, opts.duration_s, rate_hz=1000.0, speed_mps=opts.speed_mps, seed=opts.seed)
     if opts.miscalibrated:
         temp = warm_up_c(truth.t_s, start_c=32.0, end_c=42.0, time_constant_s=120.0)
         acc, gyr = miscalibrated_signals(
@@ -205,15 +249,25 @@ def demo_extensions(
 
 
 def check_options(opts: DemoOptions) -> None:
-    """Refuse combinations the emulator cannot serve (``ValueError``)."""
+    """Refuse combinations the emulator cannot serve, before anything starts.
+
+    Raises
+    ------
+    FootnavError
+        an unknown path, a number of feet other than 1 or 2, a dual-IMU board on two feet, axis
+        errors on the miscalibrated unit, or a walking speed the gait model does not cover.
+    """
     if opts.path not in PATHS:
-        raise ValueError(f"unknown path {opts.path!r}; choose one of {', '.join(PATHS)}")
+        raise FootnavError(f"unknown path {opts.path!r}; choose one of {', '.join(PATHS)}")
     if opts.feet not in (1, 2):
-        raise ValueError(f"the demo emulates 1 or 2 feet, not {opts.feet}")
+        raise FootnavError(f"the demo emulates 1 or 2 feet, not {opts.feet}")
     if opts.dual_imu and opts.feet != 1:
-        raise ValueError("the dual-IMU demo emulates one shoe")
+        raise FootnavError("the dual-IMU demo emulates one shoe: drop --feet 2 or --dual-imu")
     if opts.miscalibrated and opts.axes != "none":
-        raise ValueError("the miscalibrated unit has its own scale and misalignment errors; drop --axis-errors")
+        raise FootnavError("the miscalibrated unit has its own scale and misalignment errors; drop --axis-errors")
+    lo, hi = SPEED_RANGE_MPS
+    if not lo <= opts.speed_mps <= hi:
+        raise FootnavError(f"walking speed {opts.speed_mps:g} m/s: the emulated gait covers {lo} to {hi} m/s")
 
 
 def emulated_servers(
@@ -348,7 +402,8 @@ def run_demo(opts: DemoOptions) -> int:
                 notice(note)
     if interrupted:
         print("interrupted: stopped the unit and closed the recording", file=sys.stderr)
-    return print_summaries(opts, runs, truths, lever)
+    code = print_summaries(opts, runs, truths, lever, interrupted=interrupted)
+    return 130 if interrupted else code
 
 
 def print_summaries(
@@ -356,12 +411,15 @@ def print_summaries(
     runs: list[FootRun],
     truths: list[tuple[GaitTruth, NDArray[np.float64], NDArray[np.float64]]],
     lever: tuple[float, float, float],
+    *,
+    interrupted: bool = False,
 ) -> int:
-    """Each foot's summary against the ground truth; 1 if a foot never navigated, else 0."""
+    """Each foot's summary against the ground truth (up to where it stopped, if ``interrupted``); 1 if
+    a foot never navigated, else 0."""
     two = len(runs) > 1
     code = 0
     for run, (t, _, _) in zip(runs, truths, strict=True):
-        summary = summarise(t, run.result, run.navigator.stats.samples_out)
+        summary = summarise(t, run.result, run.navigator.stats.samples_out, interrupted=interrupted)
         prefix = f"{run.foot}: " if two else ""
         if summary is None:
             print(f"{prefix}no navigation output (the unit never stood still long enough to align)", file=sys.stderr)

@@ -13,8 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from footnav.app.commands.export import navigate_recording
+from footnav.app.commands.export import lead_in_note, navigate_recording
 from footnav.app.status import ProgressBar, input_handling
+from footnav.device.files.capture import MCAP_MAGIC
 from footnav.device.files.recordings import detect_format, load_recording
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.metrics import armse_2d_pyshoe, ate, loop_closure_error, path_length_m
@@ -49,14 +50,29 @@ class Evaluation:
 
 def evaluate_file(path: Path, smooth: str | None = None, stance_levels: bool = True) -> Evaluation:
     """Navigate one recording (smoothed when ``smooth`` is one of ``footnav.app.commands.export.SMOOTHING``) and measure
-    it (with the stance height levels unless told not to)."""
+    it (with the stance height levels unless told not to).
+
+    Raises
+    ------
+    FootnavError
+        the file is not a recording footnav reads, has no ground truth and is not a known closed loop
+        (a footnav capture among them), or never stands still.
+    """
+    if _is_capture(path):
+        raise FootnavError(
+            f"{path} is a footnav capture: it records no ground truth and no known closed loop, so there is "
+            "nothing to measure it against (`footnav export` writes its track, `footnav replay` shows it)"
+        )
     rec = load_recording(path)
     if rec.gt_pos_m is None and not rec.closed_loop:
         raise FootnavError(f"{path}: no ground truth and not a known closed loop; nothing to measure against")
     nav, stats = navigate_recording(rec, smooth=smooth, stance_levels=stance_levels)
-    est = nav.pos_n_m
+    # scored from the first still period, where the track's frame is defined, as before the samples before it were
+    # navigated (backwards from it, ``footnav.pipeline.navigation.lead_in``): the figures stay comparable
+    est = nav.pos_n_m[stats.samples_navigated_backwards :]
     skipped = stats.samples_before_alignment
-    handling = input_handling(stats)
+    lead_in = f"{note} (not scored)" if (note := lead_in_note(stats).removeprefix(", ")) else ""
+    handling = ", ".join(h for h in (input_handling(stats), lead_in) if h)
     if rec.gt_pos_m is not None:
         gt = rec.gt_pos_m[skipped:] - rec.gt_pos_m[skipped]
         fit = ate(est, gt, mirror_test=True)
@@ -87,6 +103,14 @@ def evaluate_file(path: Path, smooth: str | None = None, stance_levels: bool = T
         end_point_m=loop_3d,
         handling=handling,
     )
+
+
+def _is_capture(path: Path) -> bool:
+    try:
+        with path.open("rb") as f:
+            return f.read(len(MCAP_MAGIC)) == MCAP_MAGIC
+    except OSError:
+        return False  # the loader says what is wrong with it
 
 
 def find_recordings(paths: Iterable[Path]) -> list[Path]:

@@ -21,6 +21,7 @@ from footnav.pipeline.errors import FootnavError, InputFormatError
 from footnav.pipeline.gait.steps import segment_steps
 from footnav.pipeline.gait.tof_clearance import swing_clearance
 from footnav.pipeline.nav_types import NavBatch
+from footnav.pipeline.navigation.lead_in import RecordingRun, navigate_every_sample
 from footnav.pipeline.navigation.navigator import NavConfig, NavStats, navigate
 from footnav.pipeline.navigation.profiles import get_profile
 from footnav.pipeline.navigation.saturation import reconstruct_saturated_rates
@@ -56,7 +57,9 @@ def navigate_recording(
     with the stance height levels unless ``stance_levels`` is False (``footnav.pipeline.stance.levels``).
 
     The gyroscope's saturated stretches are reconstructed first (``footnav.pipeline.navigation.saturation``: this needs
-    the whole recording, so it happens here and not in the live navigator).
+    the whole recording, so it happens here and not in the live navigator). Every sample is navigated: a recording
+    that starts in motion has its samples before the first still period navigated backwards in time from it
+    (``footnav.pipeline.navigation.lead_in``; counted in ``NavStats.samples_navigated_backwards``).
 
     Raises
     ------
@@ -69,24 +72,20 @@ def navigate_recording(
         raise FootnavError(f"{rec.name}: {exc.args[0]}") from None
     config = NavConfig(profile=unit, stance_levels=stance_levels)
     sat = reconstruct_saturated_rates(rec.t_s, rec.gyr_b_radps)
+    run: RecordingRun = navigate
     if smooth == "whole":
         from footnav.pipeline.smoothing.rts import smooth_recording
 
-        nav, stats = smooth_recording(
-            rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, config, gyr_clipped_b=sat.clipped_b
-        )
+        run = smooth_recording
     elif smooth == "step":
         from footnav.pipeline.smoothing.stepwise import step_smooth_recording
 
-        nav, stats = step_smooth_recording(
-            rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, config, gyr_clipped_b=sat.clipped_b
-        )
+        run = step_smooth_recording
     elif smooth is not None:
         raise ValueError(f"smooth must be one of {SMOOTHING} or None, got {smooth!r}")
-    else:
-        nav, stats = navigate(
-            rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, config, gyr_clipped_b=sat.clipped_b
-        )
+    nav, stats = navigate_every_sample(
+        rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, config, run=run, gyr_clipped_b=sat.clipped_b
+    )
     if nav is None:
         raise FootnavError(
             f"{rec.name}: the unit is never still for {config.align_s:.1f} s, so roll and pitch cannot be "
@@ -95,6 +94,15 @@ def navigate_recording(
     stats.rates_reconstructed = sat.reconstructed
     stats.rates_clipped = int(np.count_nonzero(sat.clipped_b))
     return nav, stats
+
+
+def lead_in_note(stats: NavStats) -> str:
+    """What became of the samples before the first still period, as ", ..." for a summary (empty: none)."""
+    backwards = stats.samples_navigated_backwards
+    dropped = stats.samples_before_alignment - backwards
+    notes = [f"{backwards} samples before the first still period navigated backwards from it"] if backwards else []
+    notes += [f"{dropped} samples before the first still period not navigated"] if dropped else []
+    return "".join(f", {n}" for n in notes)
 
 
 CLEARANCE_COLUMNS = ("clearance", "clearance_swing", "floor_z")
@@ -207,9 +215,11 @@ def run_export(
     smooth: str | None,
     stance_levels: bool = True,
     steps_out: Path | None = None,
+    gait_out: Path | None = None,
 ) -> str:
-    """Load, navigate and write the track (and, with ``steps_out``, its steps); returns a one-line
-    summary."""
+    """Load, navigate and write the track (and, with ``steps_out``, its steps; with ``gait_out``, its
+    strides' gait parameters, ``footnav.app.api.gait_export``); returns a one-line summary (and the gait's
+    summary line)."""
     if _is_capture(source):
         options = (("--format", fmt), ("--columns", columns), ("--profile", profile))
         given = [name for name, v in options if v] + ([] if stance_levels else ["--no-stance-levels"])
@@ -218,25 +228,24 @@ def run_export(
                 f"{source} is a footnav capture, exported with the settings it was recorded with; "
                 f"drop {', '.join(given)}"
             )
-        if smooth:
-            raise FootnavError(
-                f"{source} is a footnav capture: --smooth and --step-smoothing are not available for captures "
-                "(the smoothers do not take the ToF channel); drop it for the live estimates"
-            )
-        return export_capture(source, out, steps_out)
+        return export_capture(source, out, steps_out, smooth=smooth, gait_out=gait_out)
     rec = load_other_recording(source, fmt, columns)
     nav, stats = navigate_recording(rec, profile, smooth, stance_levels)
     write_track_csv(nav, out)
-    steps = "" if steps_out is None else f", {write_steps_csv(nav, steps_out, with_covariance=smooth is None)}"
-    skipped = (
-        f", {stats.samples_before_alignment} samples before the first still period not navigated"
-        if stats.samples_before_alignment
-        else ""
-    )
+    # a step's covariance is the growth of the causal filter's between its epochs; the lead-in's shrinks towards
+    # the still period it was navigated back from, so a track with one has no step covariance, as a smoothed one
+    with_covariance = smooth is None and not stats.samples_navigated_backwards
+    steps = "" if steps_out is None else f", {write_steps_csv(nav, steps_out, with_covariance=with_covariance)}"
+    skipped = lead_in_note(stats)
     handled = f"; {h}" if (h := input_handling(stats)) else ""
+    gait = ""
+    if gait_out is not None:
+        from footnav.app.api.gait_export import export_gait
+
+        gait = "\n" + export_gait(nav, gait_out, causal_from=None if smooth else stats.samples_navigated_backwards)
     return (
         f"wrote {len(nav)} rows to {out}{steps} ({rec.format} recording, profile {profile or rec.profile}{skipped})"
-        f"{handled}"
+        f"{handled}{gait}"
     )
 
 
@@ -266,10 +275,48 @@ def _is_capture(path: Path) -> bool:
         return False  # the loaders say what is wrong with it
 
 
-def export_capture(source: Path, out: Path, steps_out: Path | None = None) -> str:
+def export_capture(
+    source: Path, out: Path, steps_out: Path | None = None, *, smooth: str | None = None, gait_out: Path | None = None
+) -> str:
     """Replay a footnav capture headless and write each foot's rows (``out`` for one foot, else
     ``<stem>-<foot><suffix>`` beside it) and, with ``steps_out``, its steps (named alike); returns a
-    one-line summary."""
+    one-line summary. ``smooth`` (one of ``SMOOTHING``): the session smoothed instead
+    (``footnav.app.commands.smooth_capture``; refused for ToF units).
+
+    Raises
+    ------
+    KeyboardInterrupt
+        the replay was interrupted (Ctrl-C): nothing written.
+    """
+    if smooth:
+        from footnav.app.commands.smooth_capture import smooth_capture
+
+        navs = {foot: nav for foot, (nav, _) in smooth_capture(source, smooth).items()}
+        how = "RTS-smoothed" if smooth == "whole" else "smoothed step by step"
+    else:
+        navs = _replayed_capture(source)
+        how = "replayed"
+    if not navs:
+        raise FootnavError(f"{source}: the capture never stood still long enough to align; nothing written")
+    written, gait = [], []
+    for foot, nav in navs.items():
+        path = out if len(navs) == 1 else out.with_name(f"{out.stem}-{foot}{out.suffix}")
+        write_track_csv(nav, path)
+        written.append(f"{len(nav)} rows to {path}{' with clearance' if nav.floor_z_m is not None else ''}")
+        if steps_out is not None:
+            spath = steps_out if len(navs) == 1 else steps_out.with_name(f"{steps_out.stem}-{foot}{steps_out.suffix}")
+            written.append(write_steps_csv(nav, spath, with_covariance=not smooth))
+        if gait_out is not None:
+            from footnav.app.api.gait_export import export_gait
+
+            gpath = gait_out if len(navs) == 1 else gait_out.with_name(f"{gait_out.stem}-{foot}{gait_out.suffix}")
+            label = f" {foot}" if len(navs) > 1 else ""
+            gait.append(export_gait(nav, gpath, causal_from=None if smooth else 0, label=label))
+    return f"wrote {'; '.join(written)} (footnav capture, {how})" + "".join(f"\n{g}" for g in gait)
+
+
+def _replayed_capture(source: Path) -> dict[str, NavBatch]:
+    """Each foot's live estimates, replayed headless (feet that never aligned left out)."""
     from footnav.app.commands.replay import ReplayOptions, run_replay
     from footnav.app.config import defaults
     from footnav.pipeline.nav_types import concat_batches
@@ -279,18 +326,9 @@ def export_capture(source: Path, out: Path, steps_out: Path | None = None) -> st
     def collect(foot: str) -> Callable[[NavBatch], None]:
         return got.setdefault(foot, []).append
 
-    if run_replay(ReplayOptions(path=source, config=defaults(), viewer=False, collect=collect)) != 0:
+    code = run_replay(ReplayOptions(path=source, config=defaults(), viewer=False, collect=collect))
+    if code == 130:
+        raise KeyboardInterrupt
+    if code != 0:
         raise FootnavError(f"{source}: the replay failed; nothing written")
-    feet = [foot for foot, batches in got.items() if batches]
-    if not feet:
-        raise FootnavError(f"{source}: the capture never stood still long enough to align; nothing written")
-    written = []
-    for foot in feet:
-        path = out if len(feet) == 1 else out.with_name(f"{out.stem}-{foot}{out.suffix}")
-        nav = concat_batches(got[foot])
-        write_track_csv(nav, path)
-        written.append(f"{len(nav)} rows to {path}{' with clearance' if nav.floor_z_m is not None else ''}")
-        if steps_out is not None:
-            spath = steps_out if len(feet) == 1 else steps_out.with_name(f"{steps_out.stem}-{foot}{steps_out.suffix}")
-            written.append(write_steps_csv(nav, spath))
-    return f"wrote {'; '.join(written)} (footnav capture, replayed)"
+    return {foot: concat_batches(batches) for foot, batches in got.items() if batches}

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from footnav.app.commands.export import load_other_recording, navigate_recording
+from footnav.app.commands.export import lead_in_note, load_other_recording, navigate_recording
 from footnav.app.feet import notice
 from footnav.app.status import input_handling
 from footnav.device.files.recordings import Recording
@@ -88,19 +88,23 @@ def run_recording_replay(opts: RecordingReplayOptions) -> int:
     )
     nav, stats = navigate_recording(rec, opts.profile, opts.smooth, opts.stance_levels)
     views, notes = open_session_views(
-        save=opts.save, want_viewer=opts.viewer, web=opts.web, recording_id=f"replay-{rec.name}", notice=notice
+        save=opts.save,
+        want_viewer=opts.viewer,
+        web=opts.web,
+        recording_id=f"replay-{rec.name}",
+        notice=notice,
+        truth=rec.gt_pos_m is not None,
     )
     for note in notes:
         print(note, file=sys.stderr)
     if views is not None:
-        _show(views, rec, nav, stats.samples_before_alignment)
+        _show(views, rec, nav, stats.samples_before_alignment - stats.samples_navigated_backwards)
         for note in views.close():
             notice(note)
-    skipped = stats.samples_before_alignment
     handled = f"; {h}" if (h := input_handling(stats)) else ""
     print(
         f"samples navigated: {len(nav)} of {len(rec)}"
-        + (f" ({skipped} before the first still period)" if skipped else "")
+        + (f" ({lead_in_note(stats).removeprefix(', ')})" if stats.samples_before_alignment else "")
         + f"; distance {path_length_m(nav.pos_n_m[:: max(1, round(rec.rate_hz / 20))]):.2f} m{handled}"
     )
     return 0

@@ -21,9 +21,11 @@ grows and after a crash up to the last complete chunk (a killed writer leaves no
 reader does not need one), chunk CRCs catch corruption, and any MCAP tool (``mcap info``, Foxglove)
 can list and export the raw bytes. The ``mcap`` Python package is pure Python.
 
-Reading: :func:`read_capture_info` for the header, :func:`iter_capture` for the messages (it stops at
-the end of a truncated file and reports it); :class:`footnav.device.links.replay.CaptureReplayLink`
-plays one unit's device -> host bytes back read for read, so the same unit driver decodes them.
+Reading: :func:`read_capture_info` for the header (checked against the schema of
+``footnav.device.files.capture_schema``: a capture is untrusted input), :func:`iter_capture` for the
+messages (it stops at the end of a truncated file and reports it);
+:class:`footnav.device.links.replay.CaptureReplayLink` plays one unit's device -> host bytes back read
+for read, so the same unit driver decodes them.
 """
 
 from __future__ import annotations
@@ -35,10 +37,11 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import IO, Any, Final, Literal
 
+from footnav.device.files.capture_schema import check_session, checked_unit_fields
 from footnav.pipeline.errors import InputFormatError
 from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
@@ -116,7 +119,23 @@ class UnitHeader:
         return {k: json.dumps(v) if isinstance(v, dict) else str(v) for k, v in d.items()}
 
     @classmethod
+    def checked(cls, path: Path, md: dict[str, str]) -> UnitHeader:
+        """From a ``footnav.unit`` record of the capture ``path``, its foot name and settings checked
+        against the schema (``footnav.device.files.capture_schema``).
+
+        Raises
+        ------
+        InputFormatError
+            the foot name or a setting does not fit the schema (the message names it).
+        """
+        fields = checked_unit_fields(path, md)
+        return replace(cls.from_metadata(md), **fields)
+
+    @classmethod
     def from_metadata(cls, md: dict[str, str]) -> UnitHeader:
+        """From a ``footnav.unit`` record as written, unchecked (a settings field that is not a JSON
+        object reads as empty)."""
+
         def obj(key: str) -> dict[str, Any]:
             try:
                 value = json.loads(md.get(key, "{}"))
@@ -395,7 +414,8 @@ def iter_capture(path: Path, state: ReadState | None = None) -> Iterator[Capture
     Raises
     ------
     InputFormatError
-        not an MCAP file, or an MCAP file from another tool.
+        not an MCAP file, an MCAP file from another tool, or a header that does not fit the schema
+        (``footnav.device.files.capture_schema``).
     """
     path = Path(path)
     _check_magic(path)
@@ -417,8 +437,9 @@ def iter_capture(path: Path, state: ReadState | None = None) -> Iterator[Capture
             elif isinstance(rec, Metadata):
                 if rec.name == "footnav.session":
                     session = dict(rec.metadata)
+                    check_session(path, session, FORMAT_VERSION)
                 elif rec.name == "footnav.unit":
-                    units.append(UnitHeader.from_metadata(dict(rec.metadata)))
+                    units.append(UnitHeader.checked(path, dict(rec.metadata)))
             elif isinstance(rec, Channel):
                 foot, _, direction = rec.topic.rpartition("/")
                 channels[rec.id] = (foot, direction)

@@ -66,12 +66,46 @@ class Recording:
         return int(self.t_s.shape[0])
 
 
-def _nominal_rate(t_s: F64) -> float:
+PLAUSIBLE_RATE_HZ = (1.0, 100_000.0)
+"""Sample rates a foot-mounted IMU recording can have, Hz: outside them the time column is in another
+unit than the one assumed, or is not a time at all."""
+
+
+def _nominal_rate(t_s: F64, path: Path | None = None) -> float:
+    """The rate of the median positive time step, Hz, once the time stamps are known to be times.
+
+    Raises
+    ------
+    InputFormatError
+        a time stamp is not finite, time runs backwards, never increases, or gives a rate outside
+        :data:`PLAUSIBLE_RATE_HZ` (the message names the row or the rate).
+    """
+    where = f"{path}: " if path is not None else ""
+    bad = np.flatnonzero(~np.isfinite(t_s))
+    if bad.size:
+        raise InputFormatError(
+            f"{where}time stamp {t_s[bad[0]]} at data row {bad[0] + 1} ({bad.size} not finite); "
+            "expected a number in every row of the time column"
+        )
     dt = np.diff(t_s)
+    back = np.flatnonzero(dt < 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise InputFormatError(
+            f"{where}time runs backwards at data row {k + 1} ({t_s[k - 1]:.9g} then {t_s[k]:.9g}; "
+            f"{back.size} such steps); expected time stamps in increasing order"
+        )
     dt = dt[dt > 0]
     if dt.size == 0:
-        raise InputFormatError("the recording's time stamps never increase; expected time in seconds")
-    return float(1.0 / np.median(dt))
+        raise InputFormatError(f"{where}the recording's time stamps never increase; expected time in seconds")
+    rate_hz = float(1.0 / np.median(dt))
+    lo, hi = PLAUSIBLE_RATE_HZ
+    if not lo <= rate_hz <= hi:
+        raise InputFormatError(
+            f"{where}the time stamps give {rate_hz:.3g} samples a second, not a sensor's rate ({lo:g} to {hi:g} Hz); "
+            "is the time column in another unit? (a generic CSV names it: --columns time=COL:ms)"
+        )
+    return rate_hz
 
 
 def load_pyshoe_mat(path: Path) -> Recording:
@@ -83,7 +117,12 @@ def load_pyshoe_mat(path: Path) -> Recording:
     mat = _loadmat_isolated(path)
     missing = [k for k in ("ts", "imu") if k not in mat]
     if missing:
-        raise InputFormatError(f"{path}: a PyShoe trial needs fields ts and imu; missing {', '.join(missing)}")
+        fields = sorted(k for k in mat if not k.startswith("__"))
+        raise InputFormatError(
+            f"{path} is not a PyShoe trial: footnav reads a .mat file only as a PyShoe VICON trial, with fields "
+            f"ts (1×n times, s) and imu (n×6: m/s², rad/s); this one has "
+            f"{', '.join(fields) if fields else 'no variables'} (missing {', '.join(missing)})"
+        )
     t = _mat_f64(mat, "ts", path).ravel()
     imu = _mat_f64(mat, "imu", path)
     if t.size < 2 or imu.ndim != 2 or imu.shape != (t.size, 6):
@@ -107,7 +146,7 @@ def load_pyshoe_mat(path: Path) -> Recording:
         t_s=t - t[0],
         acc_b_mps2=imu[:, :3].copy(),
         gyr_b_radps=imu[:, 3:].copy(),
-        rate_hz=_nominal_rate(t),
+        rate_hz=_nominal_rate(t, path),
         profile="gx3",
         gt_pos_m=gt,
         notes=notes,
@@ -170,7 +209,7 @@ def load_xio_csv(path: Path) -> Recording:
         t_s=t - t[0],
         acc_b_mps2=data[:, 4:7] * G0_MPS2,
         gyr_b_radps=data[:, 1:4] * DEG,
-        rate_hz=_nominal_rate(t),
+        rate_hz=_nominal_rate(t, path),
         profile="generic",
         closed_loop=True,
         notes=["x-io sample walk: the foot ends where it started"],
@@ -210,7 +249,7 @@ def load_openshoe_txt(path: Path) -> Recording:
         t_s=t - t[0],
         acc_b_mps2=data[:, 0:3] * G0_MPS2,
         gyr_b_radps=data[:, 3:6].copy(),
-        rate_hz=_nominal_rate(t),
+        rate_hz=_nominal_rate(t, path),
         profile="gx3",
         closed_loop=True,
         notes=notes,
@@ -291,8 +330,9 @@ def load_generic_csv(path: Path, mapping: CsvMapping | None = None) -> Recording
     wanted = [m.time, *m.acc, *m.gyr]
     missing = [c for c in wanted if c not in header]
     if missing:
-        if not header:
-            raise InputFormatError(f"{path} is empty; expected a CSV with a header row naming its columns")
+        if not any(header):
+            what = "is empty" if _is_blank(path) else "starts with a blank line"
+            raise InputFormatError(f"{path} {what}; expected a CSV with a header row naming its columns")
         noun = "column" if len(missing) == 1 else "columns"
         if all(_is_number(h) for h in header):
             raise InputFormatError(
@@ -308,10 +348,16 @@ def load_generic_csv(path: Path, mapping: CsvMapping | None = None) -> Recording
         t_s=t - t[0],
         acc_b_mps2=data[:, 1:4] * ACC_UNITS[m.acc_unit],
         gyr_b_radps=data[:, 4:7] * GYR_UNITS[m.gyr_unit],
-        rate_hz=_nominal_rate(t),
+        rate_hz=_nominal_rate(t, path),
         profile=m.profile,
         closed_loop=m.closed_loop,
     )
+
+
+def _is_blank(path: Path) -> bool:
+    """The file holds nothing but white space."""
+    with path.open("rb") as f:
+        return not f.read(1 << 16).strip()
 
 
 def _is_number(text: str) -> bool:
@@ -359,6 +405,15 @@ def load_mimu_log_recording(path: Path) -> Recording:
     )
 
 
+FORMAT_NAMES: Mapping[str, str] = {
+    "pyshoe": "a PyShoe .mat trial",
+    "xio": "an x-io CSV",
+    "openshoe": "an OpenShoe inertial log",
+    "csv": "a generic CSV",
+    vendor_log.FORMAT: "a raw log of an OpenShoe/MIMU unit's stream",
+}
+"""What each format is, for messages."""
+
 LOADERS: dict[str, Callable[[Path], Recording]] = {
     "pyshoe": load_pyshoe_mat,
     "xio": load_xio_csv,
@@ -401,9 +456,20 @@ def detect_format(path: Path) -> str:
 
 def load_recording(path: Path, fmt: str | None = None, mapping: CsvMapping | None = None) -> Recording:
     """Load ``path`` with the loader for ``fmt`` (detected from the file when None)."""
+    if path.is_dir():
+        raise InputFormatError(f"{path} is a folder; expected a recording file")
     key = fmt or detect_format(path)
     if key not in LOADERS:
         raise InputFormatError(f"unknown format {key!r}; known: {', '.join(LOADERS)}")
-    if key == "csv":
-        return load_generic_csv(path, mapping)
-    return LOADERS[key](path)
+    if mapping is not None and key != "csv":
+        how = "was given as" if fmt else "is"
+        raise InputFormatError(
+            f"{path} {how} {FORMAT_NAMES.get(key, key)}, whose columns are known: --columns applies to a generic "
+            "CSV only; drop it, or give --format csv to read the file as a generic CSV with those columns"
+        )
+    try:
+        if key == "csv":
+            return load_generic_csv(path, mapping)
+        return LOADERS[key](path)
+    except OSError as exc:
+        raise InputFormatError(f"cannot read {path}: {exc.strerror or exc}") from None

@@ -138,4 +138,24 @@ def _open_error(port: str, exc: serial.SerialException) -> DeviceError:
         return DeviceError(f"{port} is busy: another program has it open (check `fuser {port}`)")
     if code == errno.EACCES:
         return DeviceError(f"permission denied on {port}: add yourself to the dialout group and log in again")
+    if _is_not_a_tty(exc):
+        return DeviceError(
+            f"{port} is not a serial port (it does not take serial settings); give the unit's port, "
+            "e.g. /dev/ttyACM0 (`footnav scan` lists them)"
+        )
     return DeviceError(f"cannot open {port}: {exc}")
+
+
+def _is_not_a_tty(exc: BaseException) -> bool:
+    """pyserial's open failed because the device takes no terminal settings (``ENOTTY``: a file,
+    ``/dev/null``): pyserial wraps the ``termios.error`` in a message, so its cause is looked at too."""
+    seen: BaseException | None = exc
+    for _ in range(4):
+        if seen is None:
+            return False
+        if getattr(seen, "errno", None) == errno.ENOTTY or (seen.args and seen.args[0] == errno.ENOTTY):
+            return True
+        if "Inappropriate ioctl" in str(seen):
+            return True
+        seen = seen.__cause__ or seen.__context__
+    return False

@@ -1,4 +1,4 @@
-"""Gait quantities from a navigation solution: steps, foot clearance."""
+"""Gait quantities from a navigation solution: steps, foot clearance, gait parameters per stride."""
 
 from typing import TYPE_CHECKING
 
@@ -9,6 +9,12 @@ if TYPE_CHECKING:
     from .clearance import StrideClearanceTracker as StrideClearanceTracker
     from .events import GaitEventTracker as GaitEventTracker
     from .events import step_onsets as step_onsets
+    from .parameters import StrideParameters as StrideParameters
+    from .parameters import Summary as Summary
+    from .parameters import footfalls as footfalls
+    from .parameters import gait_parameters as gait_parameters
+    from .parameters import stride_parameters as stride_parameters
+    from .parameters import summarize as summarize
     from .steps import Steps as Steps
     from .steps import accumulate_steps as accumulate_steps
     from .steps import segment_steps as segment_steps

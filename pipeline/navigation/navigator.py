@@ -115,6 +115,10 @@ class NavStats:
     samples_in: int = 0
     samples_out: int = 0
     samples_before_alignment: int = 0
+    """Samples before the first still period the navigator aligned on."""
+    samples_navigated_backwards: int = 0
+    """Of those, the ones navigated backwards in time from that still period (whole recordings only:
+    ``footnav.pipeline.navigation.lead_in``); the rest were not navigated."""
     bad_dt: int = 0
     gaps: int = 0
     bad_samples: int = 0
@@ -288,6 +292,26 @@ class Navigator:
     def state(self) -> F64 | None:
         """Nominal state (16,) [p, v, q_wxyz, b_a, b_g], or None before alignment."""
         return None if self._x is None else self._x[:16].copy()
+
+    @property
+    def position_cov(self) -> F64 | None:
+        """Covariance of the position error (3, 3), m², or None before alignment."""
+        return None if self._x is None else self._P[eskf.P0 : eskf.P0 + 3, eskf.P0 : eskf.P0 + 3].copy()
+
+    def update_position(self, h_n: F64, innovation_m: float, var_m2: float) -> None:
+        """One external scalar update of the position between batches: z = hᵀ p + e, e ~ N(0, ``var_m2``),
+        innovation z − hᵀ p̂ = ``innovation_m``, h (3,) in the navigation frame. Joseph form, injection and
+        reset as the filter's own updates (``eskf.update1``); the next sample starts from the result. For
+        constraints between navigators (``footnav.pipeline.two_feet``); not used by one foot. No-op before
+        alignment."""
+        if self._x is None:
+            return
+        h = np.asarray(h_n, dtype=np.float64)
+        u = np.ascontiguousarray(self._P[:, eskf.P0 : eskf.P0 + 3] @ h)
+        s = float(h @ u[eskf.P0 : eskf.P0 + 3]) + var_m2
+        eskf.update1(self._x, self._P, u, s, float(innovation_m), np.empty(self._P.shape[0]))
+        if self.tof.active:
+            self.tof.sync(self._x)
 
     def add_ranges(self, readings: RangeBatch) -> None:
         """Queue ToF readings; each is applied when the IMU samples reach its time (and, with a
