@@ -259,6 +259,8 @@ def _demo(args: argparse.Namespace) -> int:
             board_lever_b_m=_lever(args.board_lever_arm),
             tof=args.tof,
             stance=args.stance,
+            unit=args.unit,
+            mode=args.mode,
         )
     )
 

@@ -209,6 +209,19 @@ def _add_demo_command(sub: Commands) -> None:
     _add_step_smoothing_arg(demo)
     _add_stance_arg(demo, default="inertial")
     demo.add_argument("--feet", type=int, choices=(1, 2), default=1, help="emulated shoes: 1, or 2 (left and right)")
+    demo.add_argument(
+        "--unit",
+        choices=UNIT_MODELS,
+        metavar="MODEL",
+        help=f"emulate a unit of this model ({', '.join(UNIT_MODELS)}: its base rate, command set and outputs) "
+        "and run `footnav live --unit MODEL` on it",
+    )
+    demo.add_argument(
+        "--mode",
+        choices=("auto", "imu", "raw", "ins", "steps"),
+        default="auto",
+        help="with --unit: the output `live --mode` asks the emulated unit for (default: the best it offers)",
+    )
     demo.add_argument("--pace", type=_pace, default=1.0, metavar="1x|Nx|max", help="emulator speed (default real time)")
     demo.add_argument("--seed", type=_seed, default=1, help="random seed of the emulated sensor errors")
     demo.add_argument(

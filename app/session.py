@@ -36,8 +36,18 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 LIVE_READ_INTERVAL_S = 0.010  # coalesce reads: about 10 packets a batch at 1 kHz (see OpenShoeUnit)
+STEPWISE_IDLE_NOTICE_S = 5.0
+"""A stepwise unit sends a packet per step and about one a second while standing: silence is told
+after this long, s."""
 LINK_HEALTH_PERIOD_S = 0.5
 """Link health (rate, loss, reconnects) is logged every this much device time."""
+
+
+def _idle_notice_s(mode: Mode | None, idle_notice_s: float | None) -> float | None:
+    """How long a silence is before it is told: longer for the stepwise output (a packet a step)."""
+    if isinstance(mode, StepwiseMode) and idle_notice_s is not None:
+        return max(idle_notice_s, STEPWISE_IDLE_NOTICE_S)
+    return idle_notice_s
 
 
 def output_of(mode: Mode | None) -> str:
@@ -362,7 +372,7 @@ async def run_unit_session(
             source_done,
             on_idle or idle,
             host_clock,
-            idle_notice_s,
+            _idle_notice_s(mode, idle_notice_s),
             window,
             on_window,
             use_ranges,

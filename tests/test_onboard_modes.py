@@ -204,3 +204,32 @@ async def test_a_2014_unit_is_resumed_with_its_own_stepwise_start_after_a_replug
         await unit.close()
     assert [c.cmd_id for c in second.commands if c.cmd_id != 0x01][:1] == [0x14]
     assert link.health.reconnects == 1 and link.health.stalls == 0
+
+
+@pytest.mark.parametrize(
+    ("model", "mode", "shown"), [("mimu22bt", "auto", "stepwise packets"), ("oblu", "ins", "estimates")]
+)
+def test_demo_runs_live_against_an_emulated_unit_of_the_model(
+    tmp_path: Path, model: str, mode: str, shown: str
+) -> None:
+    """``footnav demo --unit MODEL --mode MODE``: the live session on the emulated unit, its recording
+    and capture, and the final error against the emulator's truth."""
+    import subprocess
+    import sys
+
+    rrd = tmp_path / "u.rrd"
+    proc = subprocess.run(
+        [sys.executable, "-m", "footnav.app", "demo", "--unit", model, "--mode", mode, "--duration", "20",
+         "--pace", "max", "--no-viewer", "--save", str(rrd), "--sessions", str(tmp_path)],
+        capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert f"{shown} received" in proc.stdout and "final position error: 0.0" in proc.stdout, proc.stdout
+    from rerun.error_utils import RerunWarning
+
+    with pytest.warns(RerunWarning, match="no footer"):  # a live session's recording keeps no footer index
+        store = RrdReader(rrd).stream().collect()
+    steps = store.reader(index="imu_time", contents=["/world/foot/steps"]).to_arrow_table()
+    assert steps.num_rows > 5
+    settings = read_capture_info(next(tmp_path.glob("*.mcap"))).units[0].settings
+    assert settings["model"] == model and settings["mode"] == ("steps" if model == "mimu22bt" else "ins")

@@ -114,6 +114,11 @@ class DemoOptions:
     tof: bool = False
     """Emulate the multi-sensor unit: three ToF sensors and a barometer (extension states 0xE1/0xE2),
     fused by the navigator (``footnav.pipeline.aiding.tof``)."""
+    unit: str | None = None
+    """Emulate this unit model (``footnav.device.models``) and run ``footnav live`` on it
+    (:mod:`footnav.app.commands.demo_unit`); one foot."""
+    mode: str = "auto"
+    """With ``unit``: the output ``live --mode`` asks for."""
 
 
 @dataclass(frozen=True)
@@ -265,6 +270,10 @@ def check_options(opts: DemoOptions) -> None:
         raise FootnavError("the dual-IMU demo emulates one shoe: drop --feet 2 or --dual-imu")
     if opts.miscalibrated and opts.axes != "none":
         raise FootnavError("the miscalibrated unit has its own scale and misalignment errors; drop --axis-errors")
+    if opts.unit is not None and (opts.feet != 1 or opts.dual_imu or opts.tof or opts.miscalibrated):
+        raise FootnavError("--unit emulates one unit of that model: drop --feet 2, --dual-imu, --tof, --miscalibrated")
+    if opts.unit is None and opts.mode != "auto":
+        raise FootnavError("--mode needs --unit MODEL (the unit whose output it asks for)")
     lo, hi = SPEED_RANGE_MPS
     if not lo <= opts.speed_mps <= hi:
         raise FootnavError(f"walking speed {opts.speed_mps:g} m/s: the emulated gait covers {lo} to {hi} m/s")
@@ -298,6 +307,11 @@ def emulated_servers(
 def run_demo(opts: DemoOptions) -> int:
     """Run the demo; returns the process exit code."""
     check_options(opts)
+    return _shoe_demo(opts) if opts.unit is None else _unit_demo(opts)
+
+
+def _shoe_demo(opts: DemoOptions) -> int:
+    """The emulated shoe(s) through the session code of ``demo`` (see the module docstring)."""
     feet = ("foot",) if opts.feet == 1 else ("left", "right")
     truths = [dual_demo_truth(opts)] if opts.dual_imu else [demo_truth(opts, k) for k in range(len(feet))]
     truth = truths[0][0]
@@ -454,3 +468,31 @@ def dual_summary_lines(
     check = check_lever_arm(acc_b_mps2, gyr_b_radps, stance, np.asarray(lever), navigator.rate_hz, sigma_acc_mps2=sigma)
     lines.append(f"dual-IMU: {check.message}")
     return lines
+
+
+def _unit_demo(opts: DemoOptions) -> int:
+    """``demo --unit``: ``footnav live`` against the emulated unit of that model."""
+    from footnav.app.commands.demo_unit import run_unit_demo
+    from footnav.app.commands.live import LiveOptions
+
+    cfg = opts.config if opts.config is not None else defaults()
+    if opts.config is None or cfg.source("unit.profile") == DEFAULT:
+        cfg.set("unit.profile", PROFILE_OF_GRADE[opts.grade], f"demo (grade {opts.grade})")
+
+    def live(port: str) -> LiveOptions:
+        return LiveOptions(
+            ports={"foot": port}, config=cfg, save=opts.save, viewer=opts.viewer, web=opts.web, capture=opts.capture
+        )
+
+    return run_unit_demo(
+        model=opts.unit or "",
+        output=opts.mode,
+        path=opts.path,
+        duration_s=opts.duration_s,
+        speed_mps=opts.speed_mps,
+        grade=opts.grade,
+        seed=opts.seed,
+        pace=opts.realtime,
+        live=live,
+        collect=opts.collect,
+    )
