@@ -43,6 +43,19 @@ LINK_HEALTH_PERIOD_S = 0.5
 """Link health (rate, loss, reconnects) is logged every this much device time."""
 
 
+def _shown_since(start_s: float, sinks: Sequence[NavSink]) -> NavSink:
+    """One sink that passes the estimates at or after ``start_s`` to ``sinks`` (a replay's window: the
+    samples before it are navigated, not shown)."""
+
+    def show(nav: NavBatch) -> None:
+        part = nav.since(start_s)
+        if part is not None:
+            for sink in sinks:
+                sink(part)
+
+    return show
+
+
 def _idle_notice_s(mode: Mode | None, idle_notice_s: float | None) -> float | None:
     """How long a silence is before it is told: longer for the stepwise output (a packet a step)."""
     if isinstance(mode, StepwiseMode) and idle_notice_s is not None:
@@ -385,7 +398,8 @@ async def run_unit_session(
             samples = at_clock_rate(samples, navigator, result, on_rate)
         if stored is not None and mode is None:
             samples = corrected(samples, stored.calibration)
-        await run_pipeline(samples, navigator, [*sinks, keep_last])
+        shown = sinks if window is None else [_shown_since(window[0], sinks)]
+        await run_pipeline(samples, navigator, [*shown, keep_last])
     finally:
         result.link = unit.stats
         if start:

@@ -65,7 +65,7 @@ async def _batches_of(unit: OpenShoeUnit, kind: type) -> AsyncGenerator[Any, Non
 def _readings(batch: TofBatch | BaroBatch, t0_s: float, window: tuple[float, float] | None) -> SourceItem | None:
     """A ToF or barometer batch as the pipeline's readings, on the session clock (None: none left)."""
     t_s = batch.t_s - t0_s
-    keep = np.ones(t_s.shape, dtype=bool) if window is None else (t_s >= window[0]) & (t_s <= window[1])
+    keep = np.ones(t_s.shape, dtype=bool) if window is None else t_s <= window[1]
     if not keep.any():
         return None
     if isinstance(batch, TofBatch):
@@ -74,8 +74,11 @@ def _readings(batch: TofBatch | BaroBatch, t0_s: float, window: tuple[float, flo
 
 
 class _Window:
-    """A session's window ``(start, end)`` in session seconds (None: the whole session): samples before
-    it are decoded but not passed on, ``on_window()`` is called at the first one passed on."""
+    """A session's window ``(start, end)`` in session seconds (None: the whole session): samples after
+    it are not passed on and end the stream; ``on_window()`` is called at the first sample in it.
+    Samples before it are passed on, so that the window starts from the state the session had there
+    (a window starting mid-walk holds no still period to align on); the session shows only the
+    window (``NavBatch.since``)."""
 
     def __init__(self, bounds: tuple[float, float] | None, on_window: Callable[[], None] | None) -> None:
         self.bounds = bounds
@@ -87,18 +90,16 @@ class _Window:
         return self.bounds is not None and t_first_s > self.bounds[1]
 
     def trim(self, batch: Any) -> Any:
-        """``batch`` (session time) trimmed to the window to the sample, whatever the batching (None:
-        none of it in the window)."""
+        """``batch`` (session time) without its samples after the window's end, to the sample (None:
+        none left)."""
         if self.bounds is None:
             return batch
         start_s, end_s = self.bounds
-        if not self.entered:
-            if float(batch.t_s[-1]) < start_s:
-                return None
+        if not self.entered and float(batch.t_s[-1]) >= start_s:
             self.entered = True
             if self.on_window is not None:
                 self.on_window()
-        keep = (batch.t_s >= start_s) & (batch.t_s <= end_s)
+        keep = batch.t_s <= end_s
         if keep.all():
             return batch
         return batch.select(keep) if keep.any() else None
@@ -179,8 +180,9 @@ async def session_samples(
     or when ``source_done()`` and the link has gone quiet.
 
     ``host_clock`` maps the driver's host stamp of a batch to another (a replay's captured time).
-    ``window = (start, end)`` in session seconds: samples outside it are decoded but not
-    passed on (``on_window()`` is called at the first one passed on), the stream ends after ``end``.
+    ``window = (start, end)`` in session seconds: the stream ends after ``end``; ``on_window()`` is
+    called at the first sample after ``start`` (the samples before it are passed on too, to be
+    navigated but not shown: ``footnav.app.session.run_unit_session``).
     Readings before the first IMU sample (no session clock yet) are dropped; ToF readings are dropped
     when not ``use_ranges``. A window needs device time: not for the stepwise output."""
     if window is not None and output == "steps":
@@ -201,7 +203,7 @@ async def session_samples(
             if isinstance(batch, TofBatch | BaroBatch):
                 if isinstance(batch, TofBatch) and not use_ranges:
                     continue
-                if result.device_t0_s is not None and span.entered:
+                if result.device_t0_s is not None:
                     item = _readings(batch, result.device_t0_s, window)
                     if item is not None:
                         yield item

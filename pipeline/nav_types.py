@@ -104,6 +104,34 @@ class NavBatch:
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
 
+    def since(self, start_s: float) -> NavBatch | None:
+        """The samples at or after ``start_s`` (None: none); a batch cut in two keeps its per-sample
+        arrays only (its readings, strides, altitude, smoothed span and gait events belong to the
+        samples before the cut or are filled in again downstream)."""
+        if float(self.t_s[0]) >= start_s:
+            return self
+        if float(self.t_s[-1]) < start_s:
+            return None
+        k = int(np.searchsorted(self.t_s, start_s))
+
+        def cut(a: F64 | None) -> F64 | None:
+            return None if a is None else a[k:]
+
+        return NavBatch(
+            t_s=self.t_s[k:],
+            pos_n_m=self.pos_n_m[k:],
+            vel_n_mps=self.vel_n_mps[k:],
+            quat_nb_wxyz=self.quat_nb_wxyz[k:],
+            pos_cov_n_m2=self.pos_cov_n_m2[k:],
+            stance=self.stance[k:],
+            detector_stat=self.detector_stat[k:],
+            detector_threshold=np.broadcast_to(self.detector_threshold, self.t_s.shape)[k:],
+            clearance_m=self.clearance_m[k:],
+            host_ns=self.host_ns[k:],
+            cov_pos_yaw=cut(self.cov_pos_yaw),
+            floor_z_m=cut(self.floor_z_m),
+        )
+
 
 @dataclass(frozen=True, slots=True)
 class SmoothedSpan:

@@ -27,7 +27,7 @@ from footnav.device.files.capture import (
     read_capture_info,
     summarize_capture,
 )
-from footnav.pipeline.errors import InputFormatError
+from footnav.pipeline.errors import FootnavError, InputFormatError
 from footnav.pipeline.nav_types import NavBatch, concat_batches
 from mcap.writer import Writer
 
@@ -106,8 +106,7 @@ def test_two_feet_capture_replays_both(tmp_path: Path) -> None:
     again = replay(path)
     for foot in ("left", "right"):
         assert_identical(live[foot], again[foot])
-    # the window is in session seconds, exact to the sample; navigation aligns on the still start,
-    # which the window still holds (mid-walk the foot never rests the 0.5 s it needs)
+    # the window is in session seconds, exact to the sample
     part = replay(path, start_s=1.0, end_s=8.0)["left"]
     assert 1.0 <= part.t_s[0] < 1.002 and 7.998 < part.t_s[-1] <= 8.0
     # exported with --steps: a track and a steps file per foot, named by the foot
@@ -253,3 +252,16 @@ def test_full_disk_stops_the_capture_with_a_message_and_the_session_goes_on(tmp_
     assert path.stat().st_size <= 1_000_000
     got = replay(path)["foot"]  # readable up to the last chunk that fitted
     assert 5000 < len(got) < 60_000
+
+
+def test_a_window_mid_walk_starts_from_the_state_the_capture_had_there(tmp_path: Path) -> None:
+    """Mid-walk the foot never rests the 0.5 s the alignment needs: the window is navigated from the
+    capture's start and shown from its own (before: 0 samples navigated, exit 0, no reason)."""
+    path, _ = demo_capture(tmp_path, pace=math.inf, duration_s=20.0)
+    full = replay(path)["foot"]
+    part = replay(path, start_s=8.0, end_s=12.0)["foot"]
+    assert 8.0 <= part.t_s[0] < 8.002 and 11.998 < part.t_s[-1] <= 12.0
+    k = int(np.searchsorted(full.t_s, part.t_s[0]))
+    np.testing.assert_array_equal(part.pos_n_m, full.pos_n_m[k : k + len(part)])  # the same estimates
+    with pytest.raises(FootnavError, match=r"--start 500 s is after the end of the capture \(20\.0 s of device"):
+        replay(path, start_s=500.0)

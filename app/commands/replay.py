@@ -151,6 +151,27 @@ def checked_summary(opts: ReplayOptions) -> CaptureSummary:
     return summary
 
 
+def window_note(opts: ReplayOptions) -> str:
+    """What the replay's first line says of its window ('' for none)."""
+    if not (opts.start_s > 0 or math.isfinite(opts.end_s)):
+        return ""
+    return (
+        f", window {opts.start_s:g}-{opts.end_s:g} s (navigated from the capture's start, so that the window "
+        "starts from the state it had there; shown from the window's start)"
+    )
+
+
+def check_window_reached(opts: ReplayOptions, runs: list[FootRun], *, interrupted: bool = False) -> None:
+    """Raise ``FootnavError`` when the capture ended before the window's start (nothing was shown;
+    not when the user stopped the replay)."""
+    if opts.start_s <= 0 or interrupted:
+        return
+    ends = [float(r.result.last_nav.t_s[-1]) for r in runs if r.result.last_nav is not None]
+    if not ends or max(ends) < opts.start_s:
+        end = f"{max(ends):.1f} s of device time" if ends else "no sample navigated"
+        raise FootnavError(f"--start {opts.start_s:g} s is after the end of the capture ({end}): nothing to show")
+
+
 def onboard_outputs(summary: CaptureSummary, *, windowed: bool = False) -> dict[str, str]:
     """foot -> "ins" or "steps" for the feet whose capture holds the unit's own solution: by its
     header, or by a ``mode`` event (a unit whose firmware offered stepwise output only).
@@ -226,8 +247,7 @@ def run_replay(opts: ReplayOptions) -> int:
     print(
         f"replaying {opts.path} ({', '.join(f'{u.foot}: {u.port}' for u in info.units)}; "
         f"{summary.duration_s:.1f} s captured) at "
-        f"{'max speed' if math.isinf(opts.speed) else f'{opts.speed:g}x'}"
-        + (f", window {opts.start_s:g}-{opts.end_s:g} s" if windowed else ""),
+        f"{'max speed' if math.isinf(opts.speed) else f'{opts.speed:g}x'}" + window_note(opts),
         file=sys.stderr,
     )
     lever_of = {
@@ -339,6 +359,7 @@ def run_replay(opts: ReplayOptions) -> int:
     if interrupted:
         print("interrupted: the recording was closed", file=sys.stderr)
     print_results(opts, summary, runs, links, status)
+    check_window_reached(opts, runs, interrupted=interrupted)
     return 130 if interrupted else 0  # 130: the shell's code for Ctrl-C (SIGINT)
 
 
