@@ -223,3 +223,32 @@ def painted_views(img: np.ndarray) -> dict[str, float]:
         return float(((region.max(axis=2) - region.min(axis=2)) > 60).mean())
 
     return {name: coloured(r) for name, r in rects.items()}
+
+
+@pytest.mark.skipif(
+    not LAVAPIPE_ICD.exists(),
+    reason=f"no software Vulkan ({LAVAPIPE_ICD} missing): apt-get install mesa-vulkan-drivers (.ci/run does)",
+)
+@pytest.mark.parametrize(
+    "case",
+    ["two-feet", "tof", "real-recording"],
+)
+def test_every_kind_of_recording_paints_every_view(case: str, tmp_path: Path, shared_data: Path) -> None:
+    """Two feet, a ToF shoe on stairs and a real recording (the x-io loop), written by the commands a
+    user types and rendered in the headless viewer: the plan view, the 3D view and the plots are all
+    painted."""
+    from PIL import Image
+
+    rrd = tmp_path / f"{case}.rrd"
+    argv = {
+        "two-feet": ["demo", "--feet", "2", "--duration", "20", "--pace", "max", "--sessions", str(tmp_path)],
+        "tof": ["demo", "--tof", "--path", "stairs", "--duration", "20", "--pace", "max", "--sessions", str(tmp_path)],
+        "real-recording": ["replay", str(shared_data / "xio-gait-tracking" / "short_walk.csv")],
+    }[case]
+    proc = _footnav(*argv, "--no-viewer", "--save", str(rrd))
+    assert proc.returncode == 0, proc.stderr
+    shot = tmp_path / "shot.png"
+    screenshot(rrd, shot, timeout_s=60.0)
+    painted = painted_views(np.asarray(Image.open(shot).convert("RGB")).astype(np.int32))
+    assert painted["plan"] > 0.002 and painted["scene"] > 0.0005, painted
+    assert min(painted["clearance"], painted["speed"], painted["detector"]) > 0.005, painted
