@@ -38,7 +38,6 @@ References
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -310,17 +309,14 @@ def _stride_schedule(
     initial_still_s: float,
     max_strides: int | None,
     t_last_s: float,
-    side_m: float = 0.0,
+    lateral_m: float = paths.RIGHT_FOOT_OFFSET_M,
+    half_stride_ahead: bool = False,
 ) -> _Strides:
     """Enough candidate strides with their random variation, then those that end in time."""
     level_period_s = paths.stride_period_s(speed_mps)
     min_period_s = min(level_period_s, paths.STAIR_STRIDE_PERIOD_S) * (1.0 - 2.0 * _PERIOD_JITTER)
     n_max = max(0, math.ceil((duration_s - initial_still_s) / min_period_s)) + 1
-    feet = paths.footholds(path, n_max, speed_mps * level_period_s)
-    if side_m:
-        yaw = feet.yaw_rad
-        shifted = feet.pos_n_m + side_m * np.column_stack([-np.sin(yaw), np.cos(yaw), np.zeros_like(yaw)])
-        feet = dataclasses.replace(feet, pos_n_m=shifted)
+    feet = paths.footholds(path, n_max, speed_mps * level_period_s, lateral_m, half_stride_ahead)
     rng = np.random.default_rng(seed)
     stair_steps = feet.stair_steps
     on_stairs = stair_steps != 0
@@ -413,7 +409,8 @@ def simulate_walk(
     seed: int = 0,
     initial_still_s: float = 3.0,
     max_strides: int | None = None,
-    side_m: float = 0.0,
+    lateral_m: float = paths.RIGHT_FOOT_OFFSET_M,
+    half_stride_ahead: bool = False,
 ) -> GaitTruth:
     """Simulate one instrumented foot walking a course, with its true IMU signals.
 
@@ -434,10 +431,13 @@ def simulate_walk(
     max_strides : int or None
         Walk at most this many strides (e.g. one lap, ``paths.footholds(...).lap_strides``), then rest
         to the end of the record; None walks as many as fit.
-    side_m : float
-        The foot's footholds lie this far to the left of the course's line (negative: right), m, so
-        that on a turn the inner foot walks the shorter way (two feet: ±0.1 m,
-        :func:`two_feet_walks`). The track still starts at the origin.
+    lateral_m : float
+        The foot's footholds lie this far to the left of the course's line (negative: right), m: on
+        a turn the inner foot walks the shorter way. Default: the right foot, 0.1 m right.
+    half_stride_ahead : bool
+        The footholds lie half way between those of the course's (the other foot of a walker,
+        :func:`two_feet_walks`); the first stride is half as long. The track still starts at the
+        origin.
 
     Returns
     -------
@@ -465,7 +465,9 @@ def simulate_walk(
     t_s = np.arange(n) / rate_hz
     t_last_s = (n - 1) / rate_hz if n else 0.0
 
-    strides = _stride_schedule(path, duration_s, speed_mps, seed, initial_still_s, max_strides, t_last_s, side_m)
+    strides = _stride_schedule(
+        path, duration_s, speed_mps, seed, initial_still_s, max_strides, t_last_s, lateral_m, half_stride_ahead
+    )
     m = strides.swing_start_s.size
     swing_start_s, swing_end_s, swing_s = strides.swing_start_s, strides.swing_end_s, strides.swing_s
     foot_pos_n_m, foot_yaw_rad = strides.foot_pos_n_m, strides.foot_yaw_rad
@@ -554,11 +556,15 @@ def two_feet_walks(
     path: str, duration_s: float, rate_hz: float = 1000.0, speed_mps: float = 1.4, *, seed: int = 0
 ) -> tuple[GaitTruth, GaitTruth]:
     """The left and the right foot of one walker: footholds 0.1 m either side of the course's line,
-    the right foot half a stride behind the left, each with its own stride-to-stride variation
-    (seeds ``seed`` and ``seed + 1``); each track starts at its own origin."""
+    alternating. The right foot leads with a half stride to half way between the left's footholds,
+    half a stride period before the left foot's first stride, so each foot swings past the other
+    while it stands. Each foot has its own stride-to-stride variation (seeds ``seed`` and
+    ``seed + 1``); each track starts at its own origin, the feet side by side."""
     half_stride_s = 0.5 * paths.stride_period_s(speed_mps)
-    left = simulate_walk(path, duration_s, rate_hz, speed_mps, seed=seed, side_m=FOOT_SIDE_M)
+    left = simulate_walk(
+        path, duration_s, rate_hz, speed_mps, seed=seed, lateral_m=FOOT_SIDE_M, initial_still_s=3.0 + half_stride_s
+    )
     right = simulate_walk(
-        path, duration_s, rate_hz, speed_mps, seed=seed + 1, side_m=-FOOT_SIDE_M, initial_still_s=3.0 + half_stride_s
+        path, duration_s, rate_hz, speed_mps, seed=seed + 1, lateral_m=-FOOT_SIDE_M, half_stride_ahead=True
     )
     return left, right

@@ -219,9 +219,16 @@ def _lap(segments: Sequence[Segment], stride_length_m: float) -> tuple[F64, F64,
 
 
 def _tile(
-    segments: Sequence[Segment], n_strides: int, stride_length_m: float, lateral_offset_m: float, closed: bool
+    segments: Sequence[Segment],
+    n_strides: int,
+    stride_length_m: float,
+    lateral_offset_m: float,
+    closed: bool,
+    half_stride_ahead: bool = False,
 ) -> Footholds:
-    """Repeat one lap until ``n_strides`` strides exist; offset the foot from the centreline."""
+    """Repeat one lap until ``n_strides`` strides exist; offset the foot from the centreline; with
+    ``half_stride_ahead`` the footholds lie half way between the centreline's (the other foot of a
+    walker: its first stride is half as long, from the start beside the first foot)."""
     if n_strides < 0:
         raise ValueError(f"n_strides must be >= 0, got {n_strides}")
     if not 0.05 <= stride_length_m <= 3.0:
@@ -239,6 +246,10 @@ def _tile(
     centre_m = np.concatenate([lap_pos_m[:1], (lap_pos_m[None, 1:] + laps[:, None, None] * end_pos_m).reshape(-1, 3)])
     yaw_rad = np.concatenate([lap_yaw_rad[:1], (lap_yaw_rad[None, 1:] + laps[:, None] * end_yaw_rad).reshape(-1)])
     steps = np.tile(lap_steps, n_laps)
+    if half_stride_ahead:
+        centre_m = np.concatenate([centre_m[:1], 0.5 * (centre_m[1:] + centre_m[:-1])])
+        yaw_rad = np.concatenate([yaw_rad[:1], 0.5 * (yaw_rad[1:] + yaw_rad[:-1])])
+        steps = np.concatenate([steps[:1] // 2, (steps[1:] + steps[:-1]) // 2])
     left_n = np.column_stack([-np.sin(yaw_rad), np.cos(yaw_rad), np.zeros_like(yaw_rad)])
     pos_n_m = centre_m + lateral_offset_m * left_n
     m = n_strides
@@ -251,7 +262,12 @@ def _tile(
     )
 
 
-def line(n_strides: int, stride_length_m: float, lateral_offset_m: float = RIGHT_FOOT_OFFSET_M) -> Footholds:
+def line(
+    n_strides: int,
+    stride_length_m: float,
+    lateral_offset_m: float = RIGHT_FOOT_OFFSET_M,
+    half_stride_ahead: bool = False,
+) -> Footholds:
     """Footholds of a straight walk along +x.
 
     Parameters
@@ -268,10 +284,22 @@ def line(n_strides: int, stride_length_m: float, lateral_offset_m: float = RIGHT
     Footholds
         ``n_strides + 1`` footholds.
     """
-    return _tile([("straight", stride_length_m)], n_strides, stride_length_m, lateral_offset_m, closed=False)
+    return _tile(
+        [("straight", stride_length_m)],
+        n_strides,
+        stride_length_m,
+        lateral_offset_m,
+        closed=False,
+        half_stride_ahead=half_stride_ahead,
+    )
 
 
-def rectangle(n_strides: int, stride_length_m: float, lateral_offset_m: float = RIGHT_FOOT_OFFSET_M) -> Footholds:
+def rectangle(
+    n_strides: int,
+    stride_length_m: float,
+    lateral_offset_m: float = RIGHT_FOOT_OFFSET_M,
+    half_stride_ahead: bool = False,
+) -> Footholds:
     """Footholds of laps of the 18 m × 9 m rectangle, counter-clockwise (see the module docstring)."""
     length_m, width_m = RECTANGLE_SIZE_M
     r = RECTANGLE_CORNER_RADIUS_M
@@ -282,17 +310,31 @@ def rectangle(n_strides: int, stride_length_m: float, lateral_offset_m: float = 
         ("straight", width_m - 2 * r),
         corner,
     ] * 2
-    return _tile(segments, n_strides, stride_length_m, lateral_offset_m, closed=True)
+    return _tile(
+        segments, n_strides, stride_length_m, lateral_offset_m, closed=True, half_stride_ahead=half_stride_ahead
+    )
 
 
-def figure8(n_strides: int, stride_length_m: float, lateral_offset_m: float = RIGHT_FOOT_OFFSET_M) -> Footholds:
+def figure8(
+    n_strides: int,
+    stride_length_m: float,
+    lateral_offset_m: float = RIGHT_FOOT_OFFSET_M,
+    half_stride_ahead: bool = False,
+) -> Footholds:
     """Footholds of laps of the figure eight: a left loop then a right loop of radius 4 m."""
     r = FIGURE8_RADIUS_M
     segments: list[Segment] = [("arc", r, 2 * math.pi), ("arc", r, -2 * math.pi)]
-    return _tile(segments, n_strides, stride_length_m, lateral_offset_m, closed=True)
+    return _tile(
+        segments, n_strides, stride_length_m, lateral_offset_m, closed=True, half_stride_ahead=half_stride_ahead
+    )
 
 
-def stairs(n_strides: int, stride_length_m: float, lateral_offset_m: float = RIGHT_FOOT_OFFSET_M) -> Footholds:
+def stairs(
+    n_strides: int,
+    stride_length_m: float,
+    lateral_offset_m: float = RIGHT_FOOT_OFFSET_M,
+    half_stride_ahead: bool = False,
+) -> Footholds:
     """Footholds of laps of the stair course: up 24 steps, landing, turn round, down, turn round.
 
     The start foothold is on the ground half a tread before the first riser, so the first stride
@@ -310,10 +352,12 @@ def stairs(n_strides: int, stride_length_m: float, lateral_offset_m: float = RIG
         u_turn,
         ("straight", _GROUND_WALK_M),
     ]
-    return _tile(segments, n_strides, stride_length_m, lateral_offset_m, closed=True)
+    return _tile(
+        segments, n_strides, stride_length_m, lateral_offset_m, closed=True, half_stride_ahead=half_stride_ahead
+    )
 
 
-PATHS: dict[str, Callable[[int, float, float], Footholds]] = {
+PATHS: dict[str, Callable[[int, float, float, bool], Footholds]] = {
     "line": line,
     "rectangle": rectangle,
     "figure8": figure8,
@@ -323,7 +367,11 @@ PATHS: dict[str, Callable[[int, float, float], Footholds]] = {
 
 
 def footholds(
-    path: str, n_strides: int, stride_length_m: float, lateral_offset_m: float = RIGHT_FOOT_OFFSET_M
+    path: str,
+    n_strides: int,
+    stride_length_m: float,
+    lateral_offset_m: float = RIGHT_FOOT_OFFSET_M,
+    half_stride_ahead: bool = False,
 ) -> Footholds:
     """Footholds of the named course (one of :data:`PATHS`).
 
@@ -336,4 +384,4 @@ def footholds(
         builder = PATHS[path]
     except KeyError:
         raise ValueError(f"unknown path {path!r}; expected one of {sorted(PATHS)}") from None
-    return builder(n_strides, stride_length_m, lateral_offset_m)
+    return builder(n_strides, stride_length_m, lateral_offset_m, half_stride_ahead)
