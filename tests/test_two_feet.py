@@ -1,0 +1,103 @@
+"""Two feet coupled by the inter-foot distance bound (``footnav.pipeline.two_feet``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from footnav.device.emulator.motion.gait import GaitTruth, two_feet_walks
+from footnav.device.emulator.sensors.imu_errors import IMU_GRADES, corrupt
+from footnav.pipeline.navigation.navigator import NavConfig, Navigator, navigate
+from footnav.pipeline.two_feet import FootSeparation, FootSignals, apply_separation, navigate_feet
+from footnav.pipeline.two_feet.separation import horizontal_separation
+
+
+def _signals(course: str, seed: int, duration_s: float, axes: str) -> tuple[list[GaitTruth], list[FootSignals]]:
+    feet = list(two_feet_walks(course, duration_s, seed=seed))
+    out = []
+    for i, tr in enumerate(feet):
+        acc, gyr, _ = corrupt(
+            tr.acc_b_mps2, tr.gyr_b_radps, tr.rate_hz, IMU_GRADES["mpu6500x4"], seed=seed + i, axes=axes
+        )
+        out.append(FootSignals(tr.t_s, acc, gyr, tr.rate_hz))
+    return feet, out
+
+
+def _mean_error(nav: object, truth: GaitTruth) -> float:
+    pos = nav.pos_n_m  # type: ignore[attr-defined]
+    first = len(truth) - len(pos)
+    return float(np.hypot(*(pos[:, :2] - truth.pos_n_m[first:, :2]).T).mean())
+
+
+def test_independent_feet_are_the_one_foot_navigation_bit_for_bit() -> None:
+    _, (sl, sr) = _signals("rectangle", 3, 30.0, "gyro-bias-calibrated")
+    res = navigate_feet(sl, sr, coupling=None)
+    for sig, est in ((sl, res.left), (sr, res.right)):
+        alone, _ = navigate(sig.t_s, sig.acc_b_mps2, sig.gyr_b_radps, sig.rate_hz)
+        assert alone is not None and est is not None
+        np.testing.assert_array_equal(est.pos_n_m, alone.pos_n_m)
+        np.testing.assert_array_equal(est.quat_nb_wxyz, alone.quat_nb_wxyz)
+    assert res.corrections == []
+
+
+def test_a_bound_never_reached_changes_nothing() -> None:
+    _, (sl, sr) = _signals("figure8", 2, 40.0, "gyro-bias-calibrated")
+    ind = navigate_feet(sl, sr, coupling=None)
+    far = navigate_feet(sl, sr, coupling=FootSeparation(max_m=50.0))
+    assert far.corrections == []
+    assert ind.left is not None and far.left is not None and ind.right is not None and far.right is not None
+    np.testing.assert_array_equal(far.left.pos_n_m, ind.left.pos_n_m)
+    np.testing.assert_array_equal(far.right.pos_n_m, ind.right.pos_n_m)
+
+
+def test_a_violated_bound_is_applied_and_the_distance_ends_within_it() -> None:
+    # the left foot's gyroscope reads 4 % too much about z: its heading runs away on the turns
+    _, (sl, sr) = _signals("figure8", 1, 40.0, "none")
+    gyr = sl.gyr_b_radps.copy()
+    gyr[:, 2] *= 1.04
+    sl = FootSignals(sl.t_s, sl.acc_b_mps2, gyr, sl.rate_hz)
+    bound = FootSeparation(max_m=1.6)  # above the walk's true largest distance (1.52 m)
+    nav_l, nav_r = Navigator(NavConfig(), sl.rate_hz), Navigator(NavConfig(), sr.rate_hz)
+    applied = []
+    step = 50
+    for a in range(0, len(sl.t_s), step):
+        nav_l.process(sl.batch().select(slice(a, a + step)))
+        nav_r.process(sr.batch().select(slice(a, a + step)))
+        d_before = apply_separation(nav_l, nav_r, bound)
+        if np.isfinite(d_before):
+            delta = horizontal_separation(nav_l, nav_r, bound)
+            assert delta is not None
+            applied.append((d_before, float(np.hypot(delta[0], delta[1]))))
+    assert len(applied) > 5
+    before, after = np.array(applied).T
+    assert np.all(before > bound.max_m)
+    assert np.all(after <= bound.max_m + 0.01)
+
+
+def test_coupled_beats_independent_with_axis_errors() -> None:
+    # a walk with the datasheet axis errors on which the feet drift apart beyond R (benchmarks.two_feet)
+    feet, (sl, sr) = _signals("figure8", 2, 90.0, "gyro-bias-calibrated")
+    ind = navigate_feet(sl, sr, coupling=None)
+    cpl = navigate_feet(sl, sr, coupling=FootSeparation())
+    assert cpl.corrections
+    e_ind = _mean_error(ind.left, feet[0]) + _mean_error(ind.right, feet[1])
+    e_cpl = _mean_error(cpl.left, feet[0]) + _mean_error(cpl.right, feet[1])
+    assert e_cpl < 0.9 * e_ind
+
+
+def test_update_position_before_alignment_is_a_no_op() -> None:
+    nav = Navigator(NavConfig(), 1000.0)
+    nav.update_position(np.array([1.0, 0.0, 0.0]), 1.0, 0.01)
+    assert nav.state is None and nav.position_cov is None
+
+
+@pytest.mark.parametrize("shift_m", [0.5, -0.3])
+def test_update_position_moves_the_position_by_the_gain(shift_m: float) -> None:
+    _, (sl, _) = _signals("line", 1, 5.0, "none")
+    nav = Navigator(NavConfig(), sl.rate_hz)
+    nav.process(sl.batch())
+    x0, cov = nav.state, nav.position_cov
+    assert x0 is not None and cov is not None
+    nav.update_position(np.array([1.0, 0.0, 0.0]), shift_m, float(cov[0, 0]))  # noise = prior: half the way
+    x1 = nav.state
+    assert x1 is not None
+    assert x1[0] - x0[0] == pytest.approx(0.5 * shift_m, rel=1e-9)
