@@ -523,7 +523,7 @@ class OpenShoeUnit:
         if await self._wait_for_ack(cmd.cmd_id, timeout_s):
             self._commands = p.commands_for(cmd.command_set)
             if isinstance(self.link, ReconnectingLink):  # its resume sequence is in the unit's set
-                self.link.use_command_set(cmd.command_set)
+                self.link.use_command_set(cmd.command_set, cmd.frame)
             log.info("%s: firmware command set %s", self.link.name, cmd.command_set.value)
             await self._ack_data()
             return True

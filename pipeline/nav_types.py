@@ -105,9 +105,9 @@ class NavBatch:
         return int(self.t_s.shape[0])
 
     def since(self, start_s: float) -> NavBatch | None:
-        """The samples at or after ``start_s`` (None: none); a batch cut in two keeps its per-sample
-        arrays only (its readings, strides, altitude, smoothed span and gait events belong to the
-        samples before the cut or are filled in again downstream)."""
+        """The samples at or after ``start_s`` (None: none). A batch cut in two keeps its per-sample
+        arrays only: its readings, strides, altitude and smoothed span are left out (a replay window's
+        first ones may be missing), its gait events are filled in again downstream."""
         if float(self.t_s[0]) >= start_s:
             return self
         if float(self.t_s[-1]) < start_s:

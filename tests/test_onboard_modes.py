@@ -166,8 +166,9 @@ async def test_what_a_unit_cannot_stream_is_refused_before_anything_opens(
     assert not list(tmp_path.glob("*.mcap"))
 
 
+@pytest.mark.parametrize("asked", ["imu", "steps"])
 async def test_a_2014_unit_is_resumed_with_its_own_stepwise_start_after_a_replug(
-    walk: GaitTruth, tmp_path: Path
+    walk: GaitTruth, tmp_path: Path, asked: str
 ) -> None:
     """What the link re-sends after a reconnect is learned in the unit's command set: the 2014 SWDR
     start (14 00 14), not the 2015 probes (40 .., 34 ..) that the 2014 parser would misread, and no
@@ -188,9 +189,10 @@ async def test_a_2014_unit_is_resumed_with_its_own_stepwise_start_after_a_replug
         link = ReconnectingLink.serial(str(port))
         await link.open()
         unit = OpenShoeUnit(link)
-        with pytest.raises(FootnavError, match="2014"):
-            await unit.start(NormalImuMode())
-        await unit.start(StepwiseMode())
+        if asked == "imu":  # refused, then the stepwise output (live --mode auto)
+            with pytest.raises(FootnavError, match="2014"):
+                await unit.start(NormalImuMode())
+        await unit.start(StepwiseMode())  # asked at once, its 2014 start is the answered probe
         assert link.resume_bytes == Commands2014().stepwise_dead_reckoning().frame
         first.unplug()
         os.replace(port, tmp_path / "gone")
@@ -207,7 +209,8 @@ async def test_a_2014_unit_is_resumed_with_its_own_stepwise_start_after_a_replug
 
 
 @pytest.mark.parametrize(
-    ("model", "mode", "shown"), [("mimu22bt", "auto", "stepwise packets"), ("oblu", "ins", "estimates")]
+    ("model", "mode", "shown"),
+    [("mimu22bt", "auto", "stepwise packets"), ("oblu", "ins", "estimates"), ("mimu22bl", "raw", "estimates")],
 )
 def test_demo_runs_live_against_an_emulated_unit_of_the_model(
     tmp_path: Path, model: str, mode: str, shown: str
@@ -231,5 +234,13 @@ def test_demo_runs_live_against_an_emulated_unit_of_the_model(
         store = RrdReader(rrd).stream().collect()
     steps = store.reader(index="imu_time", contents=["/world/foot/steps"]).to_arrow_table()
     assert steps.num_rows > 5
-    settings = read_capture_info(next(tmp_path.glob("*.mcap"))).units[0].settings
-    assert settings["model"] == model and settings["mode"] == ("steps" if model == "mimu22bt" else "ins")
+    capture = next(tmp_path.glob("*.mcap"))
+    settings = read_capture_info(capture).units[0].settings
+    assert settings["model"] == model
+    assert settings["mode"] == {"auto": "steps", "ins": "ins", "raw": "raw_imu_fused"}[mode]
+    export = subprocess.run(
+        [sys.executable, "-m", "footnav.app", "export", str(capture), "-o", str(tmp_path / "t.csv"),
+         "--steps", str(tmp_path / "s.csv")],
+        capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert export.returncode == 0 and "Traceback" not in export.stderr, export.stderr

@@ -194,11 +194,15 @@ def summarise(
     )
 
 
-def demo_truth(opts: DemoOptions, foot_index: int) -> tuple[GaitTruth, NDArray[np.float64], NDArray[np.float64]]:
+def demo_truth(
+    opts: DemoOptions, foot_index: int, walk: GaitTruth | None = None
+) -> tuple[GaitTruth, NDArray[np.float64], NDArray[np.float64]]:
     """Ground truth and corrupted IMU signals of one emulated foot; with two feet, foot 0 is the left
     and foot 1 the right of one walker (``two_feet_walks``: either side of the line, half a stride
     apart, each its own strides and sensor errors)."""
-    if opts.feet == 2:
+    if walk is not None:
+        truth = walk
+    elif opts.feet == 2:
         truth = two_feet_walks(opts.path, opts.duration_s, speed_mps=opts.speed_mps, seed=opts.seed)[foot_index]
     else:
         truth = simulate_walk(opts.path, opts.duration_s, rate_hz=1000.0, speed_mps=opts.speed_mps, seed=opts.seed)
@@ -313,7 +317,14 @@ def run_demo(opts: DemoOptions) -> int:
 def _shoe_demo(opts: DemoOptions) -> int:
     """The emulated shoe(s) through the session code of ``demo`` (see the module docstring)."""
     feet = ("foot",) if opts.feet == 1 else ("left", "right")
-    truths = [dual_demo_truth(opts)] if opts.dual_imu else [demo_truth(opts, k) for k in range(len(feet))]
+    walks = (
+        two_feet_walks(opts.path, opts.duration_s, speed_mps=opts.speed_mps, seed=opts.seed) if opts.feet == 2 else ()
+    )
+    truths = (
+        [dual_demo_truth(opts)]
+        if opts.dual_imu
+        else [demo_truth(opts, k, walks[k] if walks else None) for k in range(len(feet))]
+    )
     truth = truths[0][0]
     board = " with a dual-IMU board" if opts.dual_imu else ""
     axes = "" if opts.axes == "none" else f", axis errors {opts.axes}"

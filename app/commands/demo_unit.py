@@ -23,6 +23,7 @@ from footnav.device.emulator.scripts import steps_from_truth, yaw_from_quat_wxyz
 from footnav.device.emulator.sensors.imu_errors import IMU_GRADES, corrupt
 from footnav.device.emulator.units import emulated_unit
 from footnav.device.models import unit_model
+from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.runner import NavSink
 
@@ -70,6 +71,8 @@ def run_unit_demo(
     """
     m = unit_model(model)
     output = m.default_output if output == "auto" else output
+    if output not in m.outputs:
+        raise FootnavError(f"the {m.title} streams {', '.join(m.outputs)}, not --mode {output}")
     truth = simulate_walk(path, duration_s, rate_hz=m.base_rate_hz, speed_mps=speed_mps, seed=seed)
     acc, gyr, _ = corrupt(truth.acc_b_mps2, truth.gyr_b_radps, truth.rate_hz, IMU_GRADES[grade], seed=seed)
     print(

@@ -225,6 +225,8 @@ async def live_session(opts: LiveOptions) -> int:
     two_feet = len(feet) > 1
     session_id = new_session_id("live")
     dual, fused = opts.dual_imu_lever_b_m, opts.fused_imu_mask
+    if output == "raw" and dual is None and fused is None:
+        fused = (1 << model.imus) - 1  # every IMU of the board, averaged
     onboard = output if output in ONBOARD_TITLES else None
     heap.limit_arenas()  # before the viewer's and the capture's threads start
     views, notes = open_session_views(

@@ -413,10 +413,9 @@ class ReconnectingLink:
         if self._on_event is not None:
             self._on_event(event)
 
-    def use_command_set(self, command_set: protocol.CommandSet) -> None:
-        """Read what the host sends as ``command_set`` from now on (the driver has probed the unit's
-        firmware); on a change, what was learned from the probes of the other set is forgotten (2014
-        firmware has stepwise output only: no continuous stream, no watchdog)."""
+    def use_command_set(self, command_set: protocol.CommandSet, acked: bytes = b"") -> None:
+        """Read the host's bytes as ``command_set`` from now on (the driver probed the firmware); on a
+        change, forget what the other set's probes taught and learn ``acked``, the answered probe."""
         if command_set is self._command_set:
             return
         self._command_set = command_set
@@ -426,6 +425,7 @@ class ReconnectingLink:
         self._swdr = protocol.CMD_2014_STEPWISE_DEAD_RECKONING if v2014 else protocol.CMD_STEPWISE_DEAD_RECKONING
         self._desired.clear()
         self._continuous = False
+        self._learn(acked)
 
     def _learn(self, data: bytes) -> bool:
         """Update the resume state from host -> device bytes; True if they held only state commands."""

@@ -298,7 +298,7 @@ def gait_parameters(nav: NavBatch, *, causal_from: int | None = 0) -> StridePara
 @dataclass(frozen=True, slots=True)
 class Summary:
     """One parameter over a recording's strides: ``mean``; ``sd``, the sample standard deviation
-    (n − 1); ``cv``, sd / mean (NaN for the turning angle, whose mean is near zero); NaN where fewer
+    (n − 1); ``cv``, sd / mean (NaN for :data:`SIGNED` parameters, whose mean is near zero); NaN where fewer
     than two strides have a value."""
 
     mean: float
@@ -323,6 +323,10 @@ SUMMARIZED = (
 """The parameters :func:`summarize` gives, in order."""
 
 
+SIGNED = frozenset({"turning_rad", "lateral_deviation_m"})
+"""Parameters whose mean is near zero (signed, either way): no CV."""
+
+
 def summarize(strides: StrideParameters) -> dict[str, Summary]:
     """Mean, SD and CV of each of :data:`SUMMARIZED` over the strides (NaN values left out)."""
     out = {}
@@ -333,5 +337,5 @@ def summarize(strides: StrideParameters) -> dict[str, Summary]:
             out[name] = Summary(float(v[0]) if v.size else math.nan, math.nan, math.nan)
             continue
         mean, sd = float(np.mean(v)), float(np.std(v, ddof=1))
-        out[name] = Summary(mean, sd, math.nan if name == "turning_rad" else sd / mean)
+        out[name] = Summary(mean, sd, math.nan if name in SIGNED else sd / mean)
     return out
