@@ -112,3 +112,21 @@ def test_a_pyshoe_replay_draws_its_truth_in_the_plan_and_plots_the_error(tmp_pat
     assert np.median(values) < 0.1 and np.percentile(values, 95) < 0.15, np.percentile(values, [50, 95])
     truth = store.reader(index="imu_time", contents=["/plan/truth/foot"]).to_arrow_table()
     assert truth.num_rows == 1
+
+
+def test_replay_with_smooth_draws_the_smoothed_track_beside_the_causal_one(tmp_path: Path, shared_data: Path) -> None:
+    rrd = tmp_path / "s.rrd"
+    trial = shared_data / "pyshoe-vicon" / "2017-11-22-11-22-03.mat"
+    proc = subprocess.run(
+        [sys.executable, "-m", "footnav.app", "replay", str(trial), "--smooth", "--no-viewer", "--save", str(rrd)],
+        capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0 and "drawn in purple beside the causal filter's track" in proc.stderr, proc.stderr
+    store = RrdReader(rrd).stream().collect()
+    causal = store.reader(index="imu_time", contents=["/world/foot/track"]).to_arrow_table()
+    smoothed = store.reader(index="imu_time", contents=["/world/foot/smoothed"]).to_arrow_table()
+    assert causal.num_rows == 6490 and smoothed.num_rows == 649  # every sample; every 10th smoothed
+    c = np.asarray(pc.list_flatten(pc.list_flatten(causal["/world/foot/track:Points3D:positions"])).to_numpy())
+    s = np.asarray(pc.list_flatten(pc.list_flatten(smoothed["/world/foot/smoothed:Points3D:positions"])).to_numpy())
+    gap = np.linalg.norm(c.reshape(-1, 3)[::10][:649] - s.reshape(-1, 3), axis=1)
+    assert 0.0 < np.median(gap) < 0.2  # two estimates of one walk, not the same one twice

@@ -3,7 +3,9 @@
 The recording (PyShoe ``.mat``, x-io CSV, OpenShoe log, generic CSV, a unit's raw log:
 ``footnav.device.files.recordings``)
 is navigated whole, exactly as ``footnav export`` navigates it (``navigate_recording``: the causal
-filter, or a smoother with ``smooth``), and its track goes to the same Rerun views as a live session's.
+filter, or a smoother with ``smooth``), and its track goes to the same Rerun views as a live session's;
+with ``smooth`` the smoothed track is drawn beside the causal filter's (as a live session draws its
+step-smoothed track).
 Where the recording has ground truth (the PyShoe VICON trials), the truth is shown too, turned and
 moved onto the estimate by the least-squares yaw and translation fit that ``footnav evaluate`` uses
 (``footnav.pipeline.metrics.ate``).
@@ -11,6 +13,7 @@ moved onto the estimate by the least-squares yaw and translation fit that ``foot
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 from dataclasses import dataclass
@@ -23,7 +26,7 @@ from footnav.app.status import input_handling
 from footnav.device.files.recordings import Recording
 from footnav.pipeline.gait.events import GaitEventTracker
 from footnav.pipeline.metrics import ate, path_length_m
-from footnav.pipeline.nav_types import NavBatch
+from footnav.pipeline.nav_types import NavBatch, SmoothedSpan
 from footnav.views.outputs import SessionViews, open_session_views
 from numpy.typing import NDArray
 
@@ -80,13 +83,18 @@ def run_recording_replay(opts: RecordingReplayOptions) -> int:
         the recording never stands still, so it cannot be aligned.
     """
     rec = load_other_recording(opts.path, opts.fmt, opts.columns)
-    how = {None: "causal filter", "whole": "RTS-smoothed", "step": "smoothed step by step"}[opts.smooth]
+    how = {
+        None: "causal filter",
+        "whole": "RTS-smoothed, drawn in purple beside the causal filter's track",
+        "step": "smoothed step by step, drawn in purple beside the causal filter's track",
+    }[opts.smooth]
     print(
         f"replaying {opts.path} ({rec.format} recording, {len(rec)} samples at {rec.rate_hz:.0f} Hz, "
         f"profile {opts.profile or rec.profile}, {how})",
         file=sys.stderr,
     )
     nav, stats = navigate_recording(rec, opts.profile, opts.smooth, opts.stance_levels)
+    shown = nav if opts.smooth is None else beside_causal(rec, nav, opts)
     views, notes = open_session_views(
         save=opts.save,
         want_viewer=opts.viewer,
@@ -98,7 +106,7 @@ def run_recording_replay(opts: RecordingReplayOptions) -> int:
     for note in notes:
         print(note, file=sys.stderr)
     if views is not None:
-        _show(views, rec, nav, stats.samples_before_alignment - stats.samples_navigated_backwards)
+        _show(views, rec, shown, stats.samples_before_alignment - stats.samples_navigated_backwards)
         for note in views.close():
             notice(note)
     handled = f"; {h}" if (h := input_handling(stats)) else ""
@@ -108,6 +116,23 @@ def run_recording_replay(opts: RecordingReplayOptions) -> int:
         + f"; distance {path_length_m(nav.pos_n_m[:: max(1, round(rec.rate_hz / 20))]):.2f} m{handled}"
     )
     return 0
+
+
+def beside_causal(rec: Recording, smoothed: NavBatch, opts: RecordingReplayOptions) -> NavBatch:
+    """The causal filter's estimates of the recording with the smoothed ones attached
+    (``NavBatch.smoothed``), so that the views draw both tracks."""
+    causal, _ = navigate_recording(rec, opts.profile, None, opts.stance_levels)
+    if len(causal) != len(smoothed):  # both navigate every sample; keep the smoothed alone otherwise
+        return smoothed
+    span = SmoothedSpan(
+        first_sample=0,
+        t_s=smoothed.t_s,
+        pos_n_m=smoothed.pos_n_m,
+        vel_n_mps=smoothed.vel_n_mps,
+        quat_nb_wxyz=smoothed.quat_nb_wxyz,
+        clearance_m=smoothed.clearance_m,
+    )
+    return dataclasses.replace(causal, smoothed=span)
 
 
 def _show(views: SessionViews, rec: Recording, nav: NavBatch, skipped: int) -> None:
