@@ -21,28 +21,40 @@ def _lever(values: list[float] | None) -> tuple[float, float, float] | None:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from footnav.app.commands.export import run_export
+    from footnav.app.commands.export import run_export, run_export_batch
 
-    print(
-        run_export(
-            args.input,
-            args.output,
-            fmt=args.format,
-            columns=args.columns,
-            profile=args.profile,
-            smooth=args.smooth,
-            stance_levels=args.stance_levels,
-            steps_out=args.steps,
-            gait_out=args.gait,
-        )
-    )
-    return 0
+    options = {
+        "fmt": args.format,
+        "columns": args.columns,
+        "profile": args.profile,
+        "smooth": args.smooth,
+        "stance_levels": args.stance_levels,
+    }
+    if len(args.input) == 1 and not args.input[0].is_dir():
+        print(run_export(args.input[0], args.output, steps_out=args.steps, gait_out=args.gait, **options))
+        return 0
+    given = [name for name, v in (("--steps", args.steps), ("--gait", args.gait)) if v]
+    if given:
+        raise FootnavError(f"{' and '.join(given)}: for one recording; drop it to export a folder or several")
+    lines, failures = run_export_batch(args.input, args.output, args.jobs, **options)
+    return _report_batch(lines, failures, "exported")
+
+
+def _report_batch(lines: list[str], failures: list[str], done: str) -> int:
+    """Each file's line, each failure's (stderr), a count; 2 when any failed."""
+    for line in lines:
+        print(line)
+    for failure in failures:
+        print(f"footnav: failed: {failure}", file=sys.stderr)
+    failed = f", {len(failures)} failed" if failures else ""
+    print(f"{done} {len(lines)} of {len(lines) + len(failures)} files{failed}")
+    return 2 if failures else 0
 
 
 def _evaluate(args: argparse.Namespace) -> int:
     from footnav.app.commands.evaluate import format_table, run_evaluate
 
-    rows, problems = run_evaluate(args.paths, smooth=args.smooth, stance_levels=args.stance_levels)
+    rows, problems = run_evaluate(args.paths, smooth=args.smooth, stance_levels=args.stance_levels, jobs=args.jobs)
     if rows:
         print(format_table(rows))
     for problem in problems:
@@ -50,7 +62,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     if not rows:
         files = "the recording" if len(problems) == 1 else f"none of the {len(problems)} recordings"
         raise FootnavError(f"nothing evaluated: {files} could be measured (the lines above say why)")
-    return 0
+    return 2 if problems else 0
 
 
 def _config(args: argparse.Namespace) -> Config:
@@ -88,6 +100,10 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
             "which unit? give --port PORT or --ble NAME, or --left PORT --right PORT for two feet "
             "(`footnav scan` lists units)"
         )
+    if args.imu_mask is not None and (args.mode != "raw" or args.dual_imu):
+        raise FootnavError("--imu-mask applies to --mode raw (the IMUs to stream and average)")
+    if args.lever_arm is not None and not args.dual_imu:
+        raise FootnavError("--lever-arm applies to --dual-imu (where IMU 2 is on the board)")
     cfg = _config(args)
     return run_live(
         LiveOptions(
@@ -101,7 +117,7 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
             tof=args.tof,
             stance=args.stance,
             dual_imu_lever_b_m=(_lever(args.lever_arm) or DEFAULT_LEVER_B_M) if args.dual_imu else None,
-            fused_imu_mask=args.imu_mask if args.mode == "raw" else None,
+            fused_imu_mask=(args.imu_mask or 0x0F) if args.mode == "raw" and not args.dual_imu else None,
             output=args.mode,
             model=args.unit,
         )

@@ -294,7 +294,7 @@ def _add_live_command(sub: Commands) -> None:
     live.add_argument(
         "--imu-mask",
         type=_imu_mask,
-        default=0x0F,
+        default=None,
         metavar="MASK",
         help="with --mode raw: the IMUs to stream and average (default 0x0F: the four of a MIMU board)",
     )
@@ -308,8 +308,9 @@ def _add_live_command(sub: Commands) -> None:
         default=None,
         choices=range(15),
         metavar="K",
-        help="output every 2**K samples of the unit's base rate, K = 0..14 (default 0 on serial, 2 on BLE: "
-        "1 kHz and 250 Hz on a 1 kHz unit); footnav navigates at the rate the unit's clock gives",
+        help="output every 2**K samples of the unit's base rate, K = 0..14 (default 0 on serial, 2 on BLE; "
+        "--mode ins: 2 on serial, 5 on BLE; 1 kHz, 250 Hz and 31.25 Hz on a 1 kHz unit); footnav navigates at "
+        "the rate the unit's clock gives",
     )
     _add_output_args(live, capture=True)
 
@@ -399,10 +400,20 @@ def _add_export_command(sub: Commands) -> None:
     export.add_argument(
         "input",
         type=Path,
+        nargs="+",
         metavar="INPUT",
-        help="a PyShoe .mat, x-io CSV, OpenShoe log, CSV, a unit's raw log, or a footnav capture",
+        help="a PyShoe .mat, x-io CSV, OpenShoe log, CSV, a unit's raw log, or a footnav capture; or folders of "
+        "them, or several",
     )
-    export.add_argument("-o", "--output", type=Path, required=True, metavar="TRACK.csv", help="where to write")
+    export.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        required=True,
+        metavar="TRACK.csv",
+        help="where to write; for a folder or several inputs, the folder to write each <name>.csv in (below the "
+        "subfolders it had)",
+    )
     export.add_argument(
         "--steps",
         type=Path,
@@ -418,6 +429,26 @@ def _add_export_command(sub: Commands) -> None:
         "swing, turning, lateral deviation, clearance) and print their mean, SD and CV",
     )
     _add_recording_args(export)
+    _add_jobs_arg(export)
+
+
+def _add_jobs_arg(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--jobs",
+        type=_positive_int,
+        metavar="N",
+        help="for a folder or several files: how many run at once, one process each (default: one per core)",
+    )
+
+
+def _positive_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected 1 or more, got {n}")
+    return n
 
 
 def _add_evaluate_command(sub: Commands) -> None:
@@ -425,6 +456,7 @@ def _add_evaluate_command(sub: Commands) -> None:
     evaluate.add_argument("paths", type=Path, nargs="+", metavar="PATH", help="recordings, or folders of them")
     _add_smooth_arg(evaluate)
     _add_levels_arg(evaluate)
+    _add_jobs_arg(evaluate)
 
 
 def _add_experiment_command(sub: Commands) -> None:

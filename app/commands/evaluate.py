@@ -10,11 +10,12 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 from footnav.app.commands.export import lead_in_note, navigate_recording
-from footnav.app.status import ProgressBar, input_handling
+from footnav.app.status import input_handling
 from footnav.device.files.capture import MCAP_MAGIC
 from footnav.device.files.recordings import detect_format, load_recording
 from footnav.pipeline.errors import FootnavError
@@ -169,20 +170,14 @@ def format_table(rows: list[Evaluation]) -> str:
 
 
 def run_evaluate(
-    paths: list[Path], smooth: str | None = None, stance_levels: bool = True
+    paths: list[Path], smooth: str | None = None, stance_levels: bool = True, jobs: int | None = 1
 ) -> tuple[list[Evaluation], list[str]]:
-    """Evaluate every recording found; returns the rows and one-line problems (files that failed)."""
+    """Evaluate every recording found, on ``jobs`` processes (None: one per core; ``footnav.app.commands.batch``);
+    returns the rows and one-line problems (files that failed), in the order of the files."""
+    from footnav.app.commands.batch import run_files
+
     files = find_recordings(paths)
     if not files:
         raise FootnavError("no recordings found in " + ", ".join(str(p) for p in paths))
-    rows: list[Evaluation] = []
-    problems: list[str] = []
-    bar = ProgressBar(len(files), "evaluate")
-    for f in files:
-        try:
-            rows.append(evaluate_file(f, smooth, stance_levels))
-        except FootnavError as exc:
-            problems.append(str(exc))
-        bar.step(f.name)
-    bar.close()
-    return rows, problems
+    results = run_files(partial(evaluate_file, smooth=smooth, stance_levels=stance_levels), files, jobs, "evaluate")
+    return [r.value for r in results if r.value is not None], [r.error for r in results if r.error]

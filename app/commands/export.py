@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import csv
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from footnav.app.status import input_handling
 from footnav.device.files.capture import MCAP_MAGIC
 from footnav.device.files.recordings import CsvMapping, Recording, load_recording
+from footnav.device.files.table_csv import write_table_csv
 from footnav.pipeline.aiding.tof_types import TofConfig
 from footnav.pipeline.errors import FootnavError, InputFormatError
 from footnav.pipeline.gait.steps import segment_steps
@@ -121,9 +123,8 @@ def write_track_csv(nav: NavBatch, path: Path) -> None:
         swing = swing_clearance(nav.t_s, nav.pos_n_m, nav.stance, nav.clearance_m, nav.ranges, TofConfig().snap_m)
         columns += [nav.clearance_m, swing, nav.floor_z_m]
         names = EXPORT_COLUMNS + CLEARANCE_COLUMNS
-    table = np.column_stack(columns)
-    stance_col = EXPORT_COLUMNS.index("stance")
-    _write_csv(path, names, ([int(v) if i == stance_col else f"{v:.9g}" for i, v in enumerate(row)] for row in table))
+    # the bytes csv.writer wrote for f"{v:.9g}" of each value (int for the stance), formatted compiled
+    write_table_csv(path, names, np.column_stack(columns), frozenset({EXPORT_COLUMNS.index("stance")}))
 
 
 def _write_csv(path: Path, header: tuple[str, ...], rows: Iterable[list[int | str]]) -> None:
@@ -176,7 +177,7 @@ def write_steps_csv(nav: NavBatch, path: Path, *, with_covariance: bool = True) 
     """Write ``STEP_COLUMNS`` for the steps of ``nav``; returns what was written, for the summary."""
     assert nav.cov_pos_yaw is not None
     steps = segment_steps(nav.t_s, nav.pos_n_m, nav.quat_nb_wxyz, nav.stance, nav.cov_pos_yaw)
-    starts = np.concatenate([[0], steps.index[:-1]])
+    starts = np.concatenate([[0], steps.index[:-1]]).astype(np.intp)[: len(steps.index)]
     duration = steps.t_s - nav.t_s[starts]
     clearance = np.array([float(np.max(nav.clearance_m[a : b + 1])) for a, b in zip(starts, steps.index, strict=True)])
     upper = np.triu_indices(4)
@@ -247,6 +248,59 @@ def run_export(
         f"wrote {len(nav)} rows to {out}{steps} ({rec.format} recording, profile {profile or rec.profile}{skipped})"
         f"{handled}{gait}"
     )
+
+
+@dataclass(frozen=True)
+class ExportJob:
+    """``footnav export`` of one file of a folder (``footnav.app.commands.batch``): called with a source, it writes
+    its track to ``destinations[source]`` (creating the folder) with these options, as :func:`run_export` does."""
+
+    destinations: dict[Path, Path]
+    fmt: str | None = None
+    columns: str | None = None
+    profile: str | None = None
+    smooth: str | None = None
+    stance_levels: bool = True
+
+    def __call__(self, source: Path) -> str:
+        out = self.destinations[source]
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise FootnavError(f"cannot create {out.parent}: {exc.strerror}") from None
+        return run_export(
+            source,
+            out,
+            fmt=self.fmt,
+            columns=self.columns,
+            profile=self.profile,
+            smooth=self.smooth,
+            stance_levels=self.stance_levels,
+        )
+
+
+def run_export_batch(
+    paths: list[Path], out_dir: Path, jobs: int | None = None, **options: str | bool | None
+) -> tuple[list[str], list[str]]:
+    """Export every recording (and capture) found in ``paths`` to ``out_dir`` (``<stem>.csv``, below the
+    subfolders it had) on ``jobs`` processes; ``options`` as :class:`ExportJob`'s. Returns each file's summary line
+    and each failure's, in the order of the files.
+
+    Raises
+    ------
+    FootnavError
+        nothing found, ``out_dir`` is a file, or two files would write the same track.
+    """
+    from footnav.app.commands.batch import export_destinations, find_export_inputs, run_files
+
+    files = find_export_inputs(paths)
+    if not files:
+        raise FootnavError("no recordings found in " + ", ".join(str(p) for p in paths))
+    if out_dir.exists() and not out_dir.is_dir():
+        raise FootnavError(f"{out_dir} is a file; with a folder or several recordings, -o names a folder")
+    job = ExportJob(dict(zip(files, export_destinations(paths, files, out_dir), strict=True)), **options)  # type: ignore[arg-type]
+    results = run_files(job, files, jobs, "export")
+    return [r.value for r in results if r.value is not None], [r.error for r in results if r.error]
 
 
 def load_other_recording(path: Path, fmt: str | None, columns: str | None) -> Recording:
