@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any, cast
 
 from footnav.device.files.capture import FLUSH_PERIOD_S
+from footnav.device.files.capture_schema import NAV_TABLES, nav_value_problem
 from footnav.pipeline.aiding.tof_types import TofConfig
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.navigation.navigator import NavConfig
@@ -201,7 +202,9 @@ def toml_value(value: Any) -> str:
 
 def _coerce(key: str, value: Any, default: Any, source: str) -> Any:
     """Check ``value`` against the type of the default; ints are fine where floats are expected; a
-    tuple of 3-vectors (the ToF sensors' lever arms or directions) is a non-empty list of [x, y, z]."""
+    tuple of 3-vectors (the ToF sensors' lever arms or directions) is a non-empty list of [x, y, z];
+    the navigator's numbers must be finite and in range (the ranges a capture's header is checked
+    against, ``footnav.device.files.capture_schema.NAV_RANGES``)."""
     if isinstance(default, tuple):
         vectors = value if isinstance(value, list | tuple) else None
         if not vectors or not all(
@@ -223,6 +226,12 @@ def _coerce(key: str, value: Any, default: Any, source: str) -> Any:
         ok = isinstance(value, str)
     if not ok:
         raise ConfigError(f"{source}: {key} must be {type(default).__name__}, got {value!r}")
+    table, _, name = key.partition(".")
+    if table == "profiles":  # [profiles.NAME] holds profile keys
+        table, name = "profile", key.rsplit(".", 1)[1]
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    if number and table in NAV_TABLES and (expected := nav_value_problem(table, name, value)) is not None:
+        raise ConfigError(f"{source}: {key} must be {expected}, got {value!r}")  # NaN, inf, out of range
     return value
 
 

@@ -123,7 +123,7 @@ NAV_NAMES: Final[Mapping[str, tuple[str, ...]]] = {"detector.kind": ("shoe", "am
 NAV_FLAGS: Final = ("detector.adaptive", "filter.stance_levels", "filter.step_smoothing")
 
 
-def _nav_value_problem(table: str, key: str, value: Any) -> str | None:
+def nav_value_problem(table: str, key: str, value: Any) -> str | None:
     """What is wrong with ``nav_config.<table>.<key>`` (what was expected), or None."""
     name = f"{table}.{key}"
     if table == "tof" and key in _VECTORS:
@@ -150,7 +150,7 @@ def _check_nav_config(nav: dict[str, Any], fail: Callable[[str, Any, str], Input
         if not isinstance(values, dict):
             raise fail(f"nav_config.{table}", values, "an object")
         for key, value in values.items():
-            problem = _nav_value_problem(table, key, value)
+            problem = nav_value_problem(table, key, value)
             if problem is not None:
                 raise fail(f"nav_config.{table}.{key}", value, problem)
 
