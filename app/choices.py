@@ -16,3 +16,5 @@ RECORDING_FORMATS = ("csv", "mimu-log", "openshoe", "pyshoe", "xio")
 """Recording formats: the keys of :data:`footnav.device.files.recordings.LOADERS`."""
 UNIT_MODELS = ("mimu22bl", "mimu22bt", "mimu4444", "oblu", "openshoe")
 """Unit models: the keys of :data:`footnav.device.models.UNIT_MODELS`."""
+OUTPUT_MODES = ("auto", "imu", "raw", "ins", "steps")
+"""``--mode``: ``auto`` and the outputs of :data:`footnav.device.models.OUTPUTS`."""

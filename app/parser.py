@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from footnav.app.choices import AXIS_ERRORS, IMU_GRADES, PATHS, PROFILES, RECORDING_FORMATS, UNIT_MODELS
+from footnav.app.choices import AXIS_ERRORS, IMU_GRADES, OUTPUT_MODES, PATHS, PROFILES, RECORDING_FORMATS, UNIT_MODELS
 
 if TYPE_CHECKING:
     from typing import TypeAlias
@@ -218,7 +218,7 @@ def _add_demo_command(sub: Commands) -> None:
     )
     demo.add_argument(
         "--mode",
-        choices=("auto", "imu", "raw", "ins", "steps"),
+        choices=OUTPUT_MODES,
         default="auto",
         help="with --unit: the output `live --mode` asks the emulated unit for (default: the best it offers)",
     )
@@ -284,7 +284,7 @@ def _add_live_command(sub: Commands) -> None:
     )
     live.add_argument(
         "--mode",
-        choices=("auto", "imu", "raw", "ins", "steps"),
+        choices=OUTPUT_MODES,
         default="auto",
         help="imu: the unit's calibrated IMU output 0x40, navigated by footnav; raw: the raw registers 0x28 "
         "of the IMUs in --imu-mask, averaged into one IMU as the unit's own array firmware does; ins: the "

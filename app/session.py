@@ -63,6 +63,18 @@ def _idle_notice_s(mode: Mode | None, idle_notice_s: float | None) -> float | No
     return idle_notice_s
 
 
+def unit_mode(output: str, rate_divider_log2: int, imu_mask: int, ins_state_ids: tuple[int, ...]) -> Mode | None:
+    """What to start on the unit for ``output`` (None: the calibrated IMU output 0x40); the inverse of
+    :func:`output_of`."""
+    if output == "raw":
+        return RawImuMode(imu_mask=imu_mask, rate_divider_log2=rate_divider_log2)
+    if output == "ins":
+        return InsMode(state_ids=ins_state_ids, rate_divider_log2=rate_divider_log2)
+    if output == "steps":
+        return StepwiseMode()
+    return None
+
+
 def output_of(mode: Mode | None) -> str:
     """The ``footnav.app.stream.session_samples`` output a mode streams (None: the calibrated IMU's)."""
     if isinstance(mode, RawImuMode):

@@ -178,6 +178,12 @@ def test_the_parsers_choices_are_the_tables_keys(names: tuple[str, ...], module:
     assert names == tuple(sorted(getattr(importlib.import_module(module), table)))
 
 
+def test_the_output_modes_are_auto_and_the_units_outputs() -> None:
+    from footnav.device.models import OUTPUTS
+
+    assert ("auto", *OUTPUTS) == choices.OUTPUT_MODES
+
+
 def test_every_emulated_path_can_be_walked() -> None:
     from footnav.device.emulator.motion.gait import simulate_walk
 

@@ -218,6 +218,14 @@ STEP_ELLIPSE_HALF_THICKNESS_M = 0.0005
 """Step ellipses are flat discs this thick (half), drawn on the floor under the step marker."""
 
 
+def horizontal_block(cov: F64) -> F64:
+    """(n, 2, 2) horizontal blocks of (n, ≥2, ≥2) covariances, symmetrised; zero where not finite."""
+    p = np.asarray(cov, dtype=np.float64)[:, :2, :2]
+    p = 0.5 * (p + np.swapaxes(p, -1, -2))
+    finite: NDArray[np.bool_] = np.asarray(np.isfinite(p).all(axis=(-1, -2)))
+    return np.where(finite[:, None, None], p, 0.0)
+
+
 def floor_ellipses(cov: F64, *, sigma_scale: float = DEFAULT_SIGMA_SCALE) -> tuple[F64, F64]:
     """Flat ellipses of the horizontal 2×2 block of (n, 3, 3) position covariances.
 
@@ -227,17 +235,13 @@ def floor_ellipses(cov: F64, *, sigma_scale: float = DEFAULT_SIGMA_SCALE) -> tup
         half_sizes (n, 3): ``sigma_scale·sqrt(eigenvalue)`` along the ellipse axes and a thin z,
         and quat_xyzw (n, 4): the rotation about z taking the x axis to the major axis.
     """
-    p = np.asarray(cov, dtype=np.float64)[:, :2, :2]
-    p = 0.5 * (p + np.swapaxes(p, -1, -2))
-    finite: NDArray[np.bool_] = np.asarray(np.isfinite(p).all(axis=(-1, -2)))
-    p = np.where(finite[:, None, None], p, 0.0)
-    evals, evecs = np.linalg.eigh(p)  # ascending: column 1 is the major axis
+    evals, evecs = np.linalg.eigh(horizontal_block(cov))  # ascending: column 1 is the major axis
     angle = np.arctan2(evecs[:, 1, 1], evecs[:, 0, 1])
-    half = np.empty((p.shape[0], 3))
+    half = np.empty((evals.shape[0], 3))
     half[:, 0] = sigma_scale * np.sqrt(np.clip(evals[:, 1], 0.0, None))
     half[:, 1] = sigma_scale * np.sqrt(np.clip(evals[:, 0], 0.0, None))
     half[:, 2] = STEP_ELLIPSE_HALF_THICKNESS_M
-    quat = np.zeros((p.shape[0], 4))
+    quat = np.zeros((evals.shape[0], 4))
     quat[:, 2] = np.sin(angle / 2.0)
     quat[:, 3] = np.cos(angle / 2.0)
     return half, quat

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import rerun as rr
-from footnav.views.convert import SendColumns, time_column
+from footnav.views.convert import SendColumns, horizontal_block, time_column
 from footnav.views.paths import PLAN, PlanPaths
 from numpy.typing import NDArray
 
@@ -75,11 +75,7 @@ def to_plan(xy_n_m: NDArray[np.floating]) -> F32:
 def ellipse_strips(center_n_m: F64, cov_n_m2: F64, *, sigma_scale: float) -> F32:
     """(k, :data:`ELLIPSE_VERTICES`, 2) plan polylines of the ``sigma_scale``-sigma ellipses of the
     (k, ≥2, ≥2) covariances' horizontal blocks around the (k, ≥2) centres."""
-    p = np.asarray(cov_n_m2, dtype=np.float64)[:, :2, :2]
-    p = 0.5 * (p + np.swapaxes(p, -1, -2))
-    finite = np.asarray(np.isfinite(p).all(axis=(-1, -2)))
-    p = np.where(finite[:, None, None], p, 0.0)
-    evals, evecs = np.linalg.eigh(p)
+    evals, evecs = np.linalg.eigh(horizontal_block(cov_n_m2))
     theta = np.linspace(0.0, 2.0 * math.pi, ELLIPSE_VERTICES)
     unit = np.stack([np.cos(theta), np.sin(theta)])  # (2, m)
     axes = evecs * (sigma_scale * np.sqrt(np.clip(evals, 0.0, None)))[:, None, :]  # (k, 2, 2)

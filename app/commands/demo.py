@@ -333,9 +333,7 @@ def _shoe_demo(opts: DemoOptions) -> int:
         f"{opts.duration_s:.0f} s at {opts.speed_mps:.1f} m/s, 1 kHz over a pseudo-terminal",
         file=sys.stderr,
     )
-    cfg = opts.config if opts.config is not None else defaults()
-    if opts.config is None or cfg.source("unit.profile") == DEFAULT:
-        cfg.set("unit.profile", PROFILE_OF_GRADE[opts.grade], f"demo (grade {opts.grade})")
+    cfg = demo_config(opts)
     session_id = new_session_id("demo")
     heap.limit_arenas()  # before the viewer's and the capture's threads start
     views, notes = open_session_views(
@@ -481,14 +479,21 @@ def dual_summary_lines(
     return lines
 
 
+def demo_config(opts: DemoOptions) -> Config:
+    """The session's configuration: the one given, or the built-in one; the unit profile follows the
+    emulated sensor grade unless the configuration names one."""
+    cfg = opts.config if opts.config is not None else defaults()
+    if opts.config is None or cfg.source("unit.profile") == DEFAULT:
+        cfg.set("unit.profile", PROFILE_OF_GRADE[opts.grade], f"demo (grade {opts.grade})")
+    return cfg
+
+
 def _unit_demo(opts: DemoOptions) -> int:
     """``demo --unit``: ``footnav live`` against the emulated unit of that model."""
     from footnav.app.commands.demo_unit import run_unit_demo
     from footnav.app.commands.live import LiveOptions
 
-    cfg = opts.config if opts.config is not None else defaults()
-    if opts.config is None or cfg.source("unit.profile") == DEFAULT:
-        cfg.set("unit.profile", PROFILE_OF_GRADE[opts.grade], f"demo (grade {opts.grade})")
+    cfg = demo_config(opts)
 
     def live(port: str) -> LiveOptions:
         return LiveOptions(

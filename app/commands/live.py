@@ -42,11 +42,10 @@ from footnav.app.feet import (
     run_feet,
     unit_header,
 )
-from footnav.app.session import UnitAddress, run_device_session
+from footnav.app.session import UnitAddress, run_device_session, unit_mode
 from footnav.app.status import StatusLine
 from footnav.device.files.capture import CaptureWriter
 from footnav.device.models import DEFAULT_MODEL, UnitModel, unit_model
-from footnav.device.modes import InsMode, Mode, RawImuMode, StepwiseMode
 from footnav.device.onboard import OnboardInsNavigator, OnboardStepNavigator
 from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
 from footnav.pipeline.dual_imu.navigator import DualNavigator
@@ -159,17 +158,6 @@ def choose_output(opts: LiveOptions, model: UnitModel) -> str:
     if dual is not None and output != "raw":
         raise FootnavError("--dual-imu streams both IMUs' raw output: drop --mode or give --mode raw")
     return output
-
-
-def unit_mode(output: str, rate_divider_log2: int, imu_mask: int) -> Mode | None:
-    """What to start on the unit for ``output`` (None: the calibrated IMU output 0x40)."""
-    if output == "raw":
-        return RawImuMode(imu_mask=imu_mask, rate_divider_log2=rate_divider_log2)
-    if output == "ins":
-        return InsMode(state_ids=ONBOARD_INS_STATES, rate_divider_log2=rate_divider_log2)
-    if output == "steps":
-        return StepwiseMode()
-    return None
 
 
 def stepwise_fallback(
@@ -300,7 +288,9 @@ async def live_session(opts: LiveOptions) -> int:
             if output == "imu"
             else None,
             extensions=opts.tof,
-            mode=unit_mode(output, run.rate_divider_log2, DUAL_IMU_MASK if fused is None else fused),
+            mode=unit_mode(
+                output, run.rate_divider_log2, DUAL_IMU_MASK if fused is None else fused, ONBOARD_INS_STATES
+            ),
             fuse_imus=fused is not None,
             on_rate=rate_reporter(run, views, two_feet=two_feet),
             on_stepwise_only=stepwise_fallback(run, views, capture, two_feet=two_feet) if probing else None,

@@ -33,7 +33,7 @@ from footnav.app.feet import (
     notice,
     rate_reporter,
 )
-from footnav.app.session import CalibrationLookup, run_unit_session
+from footnav.app.session import CalibrationLookup, run_unit_session, unit_mode
 from footnav.app.status import Progress, StatusLine, input_handling
 from footnav.device.files.capture import (
     EXPECTED,
@@ -42,7 +42,7 @@ from footnav.device.files.capture import (
     summarize_capture,
 )
 from footnav.device.links.replay import CaptureReplayLink
-from footnav.device.modes import InsMode, Mode, RawImuMode, StepwiseMode
+from footnav.device.modes import Mode
 from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
 from footnav.device.unit import OpenShoeUnit
 from footnav.pipeline.dual_imu.navigator import DualNavigator
@@ -194,17 +194,14 @@ def onboard_outputs(summary: CaptureSummary, *, windowed: bool = False) -> dict[
 def captured_mode(settings: dict[str, Any], onboard: str | None, *, dual: bool) -> Mode | None:
     """The output mode a captured unit was started in, from its header's settings (None: the
     calibrated IMU output)."""
-    rate_divider = int(settings.get("rate_divider_log2", 0))
-    if onboard == "ins":
-        states = settings.get("ins_state_ids", list(ONBOARD_INS_STATES))
-        return InsMode(state_ids=tuple(int(i) for i in states), rate_divider_log2=rate_divider)
-    if onboard == "steps":
-        return StepwiseMode()
     fused_mask = settings.get("fused_imu_mask")
-    if dual or isinstance(fused_mask, int):
-        mask = int(fused_mask) if isinstance(fused_mask, int) else DUAL_IMU_MASK
-        return RawImuMode(imu_mask=mask, rate_divider_log2=rate_divider)
-    return None
+    output = onboard or ("raw" if dual or isinstance(fused_mask, int) else "imu")
+    return unit_mode(
+        output,
+        int(settings.get("rate_divider_log2", 0)),
+        int(fused_mask) if isinstance(fused_mask, int) else DUAL_IMU_MASK,
+        tuple(int(i) for i in settings.get("ins_state_ids", ONBOARD_INS_STATES)),
+    )
 
 
 def capture_calibration_lookup(summary: CaptureSummary, cfg: Config, foot: str) -> CalibrationLookup | None:
