@@ -34,6 +34,7 @@ from footnav.pipeline.samples import ImuBatch
 from footnav.pipeline.smoothing.stepwise import StepSmoothingNavigator
 from footnav.pipeline.stance.detectors import StreamingDetector
 
+from benchmarks.gaitmap_baseline import gaitmap_wall_s
 from benchmarks.machine import machine
 from benchmarks.numpy_filter import run_filter_numpy
 
@@ -102,6 +103,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=3, help="repeats per figure; the best counts (3)")
     ap.add_argument("--batch", type=int, default=50, help="samples per batch in the streamed row (50)")
     ap.add_argument("--no-compile", action="store_true", help="skip the compile-time measurement")
+    ap.add_argument(
+        "--gaitmap",
+        metavar="PYTHON",
+        help="a Python with gaitmap installed: time its RtsKalman on the walk's first --gaitmap-s seconds too",
+    )
+    ap.add_argument("--gaitmap-s", type=float, default=120.0, help="seconds of walk gaitmap runs on (120)")
     ap.add_argument(
         "--all",
         action="store_true",
@@ -199,6 +206,19 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  filter / numpy baseline on the same {m} samples: {same.rate / base.rate:.0f}x")
     print(f"  detector + filter (one batch) / numpy baseline filter: {rows[2].rate / base.rate:.0f}x")
     print(f"  compiled vs numpy filter, largest position difference: {agree:.1e} m")
+    if args.gaitmap:
+        g = min(n, round(args.gaitmap_s * RATE_HZ))
+        gm = Timing(
+            "gaitmap RtsKalman (ESKF + RTS smoother)",
+            g,
+            gaitmap_wall_s(args.gaitmap, acc[:g], gyr[:g], RATE_HZ, 2),
+            1.0,
+        )
+        ours = _time(
+            "detector + filter on gaitmap's samples", g, lambda: navigate(t[:g], acc[:g], gyr[:g], RATE_HZ, cfg), r
+        )
+        print(f"  gaitmap RtsKalman on the first {g} samples: {gm.rate:,.0f} samples/s; navigate on the same: "
+              f"{ours.rate:,.0f} samples/s, {ours.rate / gm.rate:.0f}x gaitmap")  # fmt: skip
     if not args.no_compile:
         imp, cold, warm = compile_times()
         print(f"  numba compile time, first navigate() call: {cold:.1f} s with an empty cache, {warm:.2f} s cached")

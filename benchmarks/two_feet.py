@@ -1,20 +1,28 @@
-"""Two feet coupled by the inter-foot distance bound against two independent feet, on emulated walks.
+"""Two feet coupled (distance bound, relative heading) against two independent feet, on emulated walks.
 
-    .venv/bin/python -m benchmarks.two_feet [--seeds 4] [--duration 90] [--bounds 2.1,1.6]
+    .venv/bin/python -m benchmarks.two_feet [--seeds 4] [--duration 90] [--bounds 1.2]
+        [--variants default,distance,heading] [--heading-sigma 4] [--heading-drift 0]
+        [--heading-drift-per-turn 0.02]
 
 Each course (rectangle, figure-eight, line, stairs) and seed is walked by two emulated feet
 (``two_feet_walks``), each given its own errors of the MPU-6500 x4 grade (biases, bias instability,
 noise), without and with the axis errors ``gyro-bias-calibrated`` (the datasheet's gyroscope scale and
 cross-axis errors, which make the heading drift). Both feet are navigated independently and coupled
-(``footnav.pipeline.two_feet``) with each bound R of ``--bounds``. Printed per walk: each foot's final
-and mean-along-the-walk horizontal error, independent and coupled (the first R), and the change of
-the two feet's mean error in %; then per R the mean over the walks, how many got worse by more
-than 1 cm, and the runtime ratio coupled / independent.
+(``footnav.pipeline.two_feet``) by each variant of ``--variants`` with each bound R of ``--bounds``:
+``distance`` the distance bound alone, ``heading`` the relative heading constraint alone (σ, drift per
+stride and per turn from ``--heading-sigma``, ``--heading-drift`` in degrees, ``--heading-drift-per-turn``),
+``distance+heading`` both (those σ and drifts), ``default`` the default ``FootSeparation`` with R.
+Printed per walk: each foot's final and mean-along-the-walk horizontal error, independent and
+coupled (the first variant and R), and the change of the two feet's mean error in %; then per
+variant and R the mean over the walks, how many got worse by more than 1 cm, and the runtime ratio
+coupled / independent.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import math
 import time
 
 import numpy as np
@@ -22,6 +30,7 @@ from footnav.device.emulator.motion.gait import GaitTruth, two_feet_walks
 from footnav.device.emulator.sensors.imu_errors import IMU_GRADES, corrupt
 from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.two_feet import FootSeparation, FootSignals, navigate_feet
+from footnav.pipeline.two_feet.heading import RelativeHeading
 
 COURSES = ("rectangle", "figure8", "line", "stairs")
 WORSE_M = 0.01
@@ -55,16 +64,35 @@ Row = tuple[float, float, float, float, float, int]
 """(final L, final R, mean L, mean R, runtime s, corrections)."""
 
 
-def run(course: str, seed: int, duration_s: float, axes: str, bounds: list[float]) -> dict[str, Row]:
-    """Errors (final L, final R, mean L, mean R) and runtimes of one walk, independent and per bound."""
+VARIANTS = ("default", "distance", "heading", "distance+heading")
+
+
+def couplings(variants: list[str], bounds: list[float], heading: RelativeHeading) -> dict[str, FootSeparation]:
+    """The couplings to compare, by name ``variant@R`` (``heading`` once, with no R)."""
+    out: dict[str, FootSeparation] = {}
+    for v in variants:
+        if v not in VARIANTS:
+            raise SystemExit(f"unknown variant {v!r}: one of {', '.join(VARIANTS)}")
+        if v == "heading":
+            out[v] = FootSeparation(max_m=math.inf, heading=heading)
+            continue
+        for b in bounds:
+            base = FootSeparation(max_m=b)
+            h = {"default": base.heading, "distance": None, "distance+heading": heading}[v]
+            out[f"{v}@{b:g}"] = dataclasses.replace(base, heading=h)
+    return out
+
+
+def run(course: str, seed: int, duration_s: float, axes: str, variants: dict[str, FootSeparation]) -> dict[str, Row]:
+    """Errors (final L, final R, mean L, mean R) and runtimes of one walk, independent and per variant."""
     (left, right), (sl, sr) = walk_signals(course, seed, duration_s, axes)
     out: dict[str, Row] = {}
-    for name, coupling in [("ind", None), *[(f"{b:g}", FootSeparation(max_m=b)) for b in bounds]]:
+    for name, coupling in [("ind", None), *variants.items()]:
         t0 = time.perf_counter()
         res = navigate_feet(sl, sr, coupling=coupling)
         dt = time.perf_counter() - t0
         (fl, ml), (fr, mr) = horizontal_errors(res.left, left), horizontal_errors(res.right, right)
-        out[name] = (fl, fr, ml, mr, dt, len(res.corrections))
+        out[name] = (fl, fr, ml, mr, dt, len(res.corrections) + len(res.heading_updates))
     return out
 
 
@@ -72,13 +100,25 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--duration", type=float, default=90.0)
-    ap.add_argument("--bounds", default="2.1,1.6", help="R values, m, comma-separated (the first is tabled)")
+    ap.add_argument("--bounds", default="1.2", help="R values, m, comma-separated")
+    ap.add_argument("--variants", default="default", help=f"comma-separated, of {', '.join(VARIANTS)}")
+    ap.add_argument("--heading-sigma", type=float, default=None, help="σ of the relative heading, degrees")
+    ap.add_argument("--heading-drift", type=float, default=None, help="heading drift per stride, degrees")
+    ap.add_argument("--heading-drift-per-turn", type=float, default=None, help="heading drift per turn")
     args = ap.parse_args(argv)
     bounds = [float(b) for b in args.bounds.split(",")]
+    heading = RelativeHeading()
+    if args.heading_sigma is not None:
+        heading = dataclasses.replace(heading, sigma_rad=math.radians(args.heading_sigma))
+    if args.heading_drift is not None:
+        heading = dataclasses.replace(heading, drift_rad=math.radians(args.heading_drift))
+    if args.heading_drift_per_turn is not None:
+        heading = dataclasses.replace(heading, drift_per_turn=args.heading_drift_per_turn)
+    variants = couplings(args.variants.split(","), bounds, heading)
     warm = walk_signals("line", 1, 10.0, "none")[1]
-    navigate_feet(warm[0], warm[1], coupling=FootSeparation())  # compile first
-    main_r = f"{bounds[0]:g}"
-    print(f"two feet, {args.duration:.0f} s walks, mpu6500x4; horizontal error, m (L/R); coupled at R = {main_r} m")
+    navigate_feet(warm[0], warm[1], coupling=FootSeparation(heading=RelativeHeading()))  # compile first
+    main_r = next(iter(variants))
+    print(f"two feet, {args.duration:.0f} s walks, mpu6500x4; horizontal error, m (L/R); coupled: {main_r}")
     hdr = f"{'axes':<6}{'course':<10}{'seed':>4}  {'indep end':>11} {'indep mean':>11}  "
     print(hdr + f"{'coupled end':>11} {'cpl mean':>11} {'updates':>7} {'change':>7}")
     summary: dict[tuple[str, str], list[tuple[float, float, float, float]]] = {}
@@ -86,14 +126,14 @@ def main(argv: list[str] | None = None) -> int:
         tag = "none" if axes == "none" else "axes"
         for course in COURSES:
             for seed in range(1, args.seeds + 1):
-                r = run(course, seed, args.duration, axes, bounds)
+                r = run(course, seed, args.duration, axes, variants)
                 fl, fr, ml, mr, ti, _ = r["ind"]
                 ind_mean = 0.5 * (ml + mr)
-                for b in bounds:
-                    cfl, cfr, cml, cmr, tc, nc = r[f"{b:g}"]
+                for name in variants:
+                    cfl, cfr, cml, cmr, tc, nc = r[name]
                     cpl_mean = 0.5 * (cml + cmr)
-                    summary.setdefault((tag, f"{b:g}"), []).append((ind_mean, cpl_mean, ti, tc))
-                    if f"{b:g}" == main_r:
+                    summary.setdefault((tag, name), []).append((ind_mean, cpl_mean, ti, tc))
+                    if name == main_r:
                         change = 100.0 * (cpl_mean / ind_mean - 1.0)
                         print(
                             f"{tag:<6}{course:<10}{seed:>4}  {fl:>5.2f}/{fr:<5.2f} {ml:>5.2f}/{mr:<5.2f}  "
@@ -101,14 +141,15 @@ def main(argv: list[str] | None = None) -> int:
                         )
     print()
     print(
-        f"{'axes':<6}{'R m':>5}  {'indep mean':>10} {'coupled':>8} {'change':>7} {'worse>1cm':>10} {'time ratio':>10}"
+        f"{'axes':<6}{'variant@R m':>22}  {'indep mean':>10} {'coupled':>8} {'change':>7} {'worse>1cm':>10} "
+        f"{'time ratio':>10}"
     )
-    for (tag, bound), rows in summary.items():
+    for (tag, name), rows in summary.items():
         a = np.array(rows)
         worse = int(np.count_nonzero(a[:, 1] - a[:, 0] > WORSE_M))
         change = 100.0 * (a[:, 1].mean() / a[:, 0].mean() - 1.0)
         print(
-            f"{tag:<6}{bound:>5}  {a[:, 0].mean():>10.3f} {a[:, 1].mean():>8.3f} {change:>+6.0f}% "
+            f"{tag:<6}{name:>22}  {a[:, 0].mean():>10.3f} {a[:, 1].mean():>8.3f} {change:>+6.0f}% "
             f"{worse:>6}/{len(a):<3} {a[:, 3].sum() / a[:, 2].sum():>10.2f}"
         )
     return 0

@@ -150,11 +150,10 @@ def _predict(
 ) -> tuple[bool, bool]:
     """Propagate ``x`` and ``P`` over the interval ``dt`` ending at sample ``k`` (in place).
 
-    ``_predict`` then ``_correct`` (at stance samples that are not bad) are :func:`run_filter_kernel`'s
-    loop body, operation for operation, for the smoother's storing pass
-    (``footnav.pipeline.smoothing.rts``; ``tests/test_smoother.py`` checks that both give
-    bit-identical states and covariances). The batch loop repeats their body instead of calling them
-    (why: the documentation's design page "Estimator").
+    ``_predict`` then ``_correct`` (at stance samples that are not bad) are the loop body of
+    :func:`run_filter_kernel` and of the smoother's storing pass (``footnav.pipeline.smoothing.rts``;
+    ``tests/test_smoother.py`` checks that both give bit-identical states and covariances), inlined
+    in both (the documentation's design page "Estimator", "Compiled filter kernels").
 
     Returns
     -------
@@ -310,7 +309,7 @@ def _correct(
             # a standing foot: R = r I + σ² u uᵀ, u the navigation frame's vertical in body axes
             u0, u1, u2 = vertical_in_body_s(x[6], x[7], x[8], x[9])
             _update3_sym(
-                x, P, BG0, y, r_zaru + s2 * u0 * u0, s2 * u0 * u1, s2 * u0 * u2,
+                x, P, np.int64(BG0), y, r_zaru + s2 * u0 * u0, s2 * u0 * u1, s2 * u0 * u2,
                 r_zaru + s2 * u1 * u1, s2 * u1 * u2, r_zaru + s2 * u2 * u2, work,
             )  # fmt: skip
         else:
@@ -362,7 +361,6 @@ def run_filter_kernel(
         or x.shape[0] != P.shape[0] + 1
     ):
         raise ValueError("run_filter: inconsistent array shapes")
-    g = par.g
     q_diag = np.zeros(P.shape[0])
     y = np.empty(3)
     f_n = np.empty(3)
@@ -371,58 +369,9 @@ def run_filter_kernel(
     M = np.empty((9, P.shape[0]))
     work = np.empty((10, P.shape[0]))
     for k in range(n):
-        dt = dt_s[k]
-        bad = False
-        for r in range(3):
-            if not (math.isfinite(acc_b_mps2[k, r]) and math.isfinite(gyr_b_radps[k, r])):
-                bad = True
-        if bad:
-            counters[CNT_BAD_SAMPLE] += 1
-        if dt <= 0.0 or not math.isfinite(dt):
-            counters[CNT_BAD_DT] += 1
-        else:
-            if dt >= par.dt_max:
-                counters[CNT_GAP] += 1
-            quat_to_mat_into(x[6], x[7], x[8], x[9], R0)
-            if bad:
-                # no usable sample: hold the nominal motion, let the uncertainty grow
-                f_n[0], f_n[1], f_n[2] = 0.0, 0.0, g
-            else:
-                w0 = gyr_b_radps[k, 0] - x[13]
-                w1 = gyr_b_radps[k, 1] - x[14]
-                w2 = gyr_b_radps[k, 2] - x[15]
-                fb0 = acc_b_mps2[k, 0] - x[10]
-                fb1 = acc_b_mps2[k, 1] - x[11]
-                fb2 = acc_b_mps2[k, 2] - x[12]
-                ew, ex, ey, ez = quat_from_rotvec_s(w0 * dt, w1 * dt, w2 * dt)
-                qw, qx, qy, qz = quat_mul_s(x[6], x[7], x[8], x[9], ew, ex, ey, ez)
-                norm = math.sqrt(qw**2 + qx**2 + qy**2 + qz**2)
-                qw, qx, qy, qz = qw / norm, qx / norm, qy / norm, qz / norm
-                x[6], x[7], x[8], x[9] = qw, qx, qy, qz
-                quat_to_mat_into(qw, qx, qy, qz, R1)
-                for r in range(3):
-                    f_n[r] = (
-                        0.0
-                        + 0.5 * (R0[r, 0] + R1[r, 0]) * fb0
-                        + 0.5 * (R0[r, 1] + R1[r, 1]) * fb1
-                        + 0.5 * (R0[r, 2] + R1[r, 2]) * fb2
-                    )
-                for r in range(3):
-                    for c in range(3):
-                        R0[r, c] = R1[r, c]
-            for r in range(3):
-                a = f_n[r] - (g if r == 2 else 0.0)
-                x[r] += x[3 + r] * dt + 0.5 * a * dt * dt
-                x[3 + r] += a * dt
-            if bad:
-                f2, w2 = 0.0, 0.0
-            else:
-                f2 = fb0 * fb0 + fb1 * fb1 + fb2 * fb2
-                w2 = w0 * w0 + w1 * w1 + w2 * w2
-            _process_noise(par, f2, w2, dt, q_diag)
-            _propagate_cov(P, M, R0, f_n, dt, q_diag)
-            if not bad:
-                _add_body_rate_noise(P, R0, gyr_clip_var_b, k, dt)
+        bad, _ = _predict(
+            x, P, acc_b_mps2, gyr_b_radps, gyr_clip_var_b, k, dt_s[k], par, q_diag, f_n, R0, R1, M, counters
+        )
         filter_state[STATE_LAST_REJECTED] = 0
         track_stance(stance[k], filter_state)
         if stance[k] and not bad:

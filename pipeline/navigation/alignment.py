@@ -63,3 +63,52 @@ def align_from_still(acc_b_mps2: F64, gyr_b_radps: F64) -> Alignment:
     roll = math.atan2(f[1], f[2])
     pitch = math.atan2(-f[0], math.hypot(f[1], f[2]))
     return Alignment(quat_from_euler_zyx(roll, pitch, 0.0), g, gyr_b_radps.mean(axis=0))
+
+
+def quiet_samples(
+    acc_b_mps2: F64, gyr_b_radps: F64, window: int, max_rate_radps: float, max_acc_dev_mps2: float
+) -> NDArray[np.bool_]:
+    """The samples quiet enough to align on (n,): |ω| below ``max_rate_radps`` and | |f| − mean |f| |
+    below ``max_acc_dev_mps2``, the mean over the centred window of ``window`` samples (normalised at
+    the ends, where the window is cut short); ``acc_b_mps2`` and ``gyr_b_radps`` (n, 3), m/s² and rad/s."""
+    norm_f = np.linalg.norm(acc_b_mps2, axis=1)
+    rate = np.linalg.norm(gyr_b_radps, axis=1)
+    kernel = np.ones(window) / window
+    mean_f = np.convolve(norm_f, kernel, mode="same") / np.convolve(np.ones_like(norm_f), kernel, mode="same")
+    with np.errstate(invalid="ignore"):
+        quiet: NDArray[np.bool_] = (rate < max_rate_radps) & (np.abs(norm_f - mean_f) < max_acc_dev_mps2)
+    return quiet
+
+
+def first_quiet_run(
+    acc_b_mps2: F64, gyr_b_radps: F64, window: int, max_rate_radps: float, max_acc_dev_mps2: float
+) -> int:
+    """Index of the first run of ``window`` samples :func:`quiet_samples` finds quiet, or −1.
+
+    The search runs on prefixes of 8, 16, 32 ... windows. A sample's flag depends only on the samples
+    within one window of it, each summed in the same order (``numpy.convolve`` takes one dot product
+    per output), so on a prefix every flag more than a window before its end is the whole recording's,
+    bit for bit: a walk that starts still is decided on its first seconds, not by an O(n · window)
+    convolution of the whole recording, and a run found there is the first of the whole.
+    """
+    n = acc_b_mps2.shape[0]
+    if n < window:  # (``numpy.convolve`` would return ``window`` values)
+        return -1
+    length = min(n, 8 * window)
+    while True:
+        quiet = quiet_samples(acc_b_mps2[:length], gyr_b_radps[:length], window, max_rate_radps, max_acc_dev_mps2)
+        start = _first_run(quiet if length == n else quiet[: length - window], window)
+        if start >= 0 or length == n:
+            return start
+        length = min(n, 2 * length)
+
+
+def _first_run(mask: NDArray[np.bool_], length: int) -> int:
+    """Index of the first run of at least ``length`` True values in ``mask``, or −1."""
+    if mask.size < length:
+        return -1
+    # run[i] = Σ mask[i:i+length], exactly (integer prefix sums: O(n), not O(n · length))
+    csum = np.concatenate([[0], np.cumsum(mask, dtype=np.int64)])
+    run = csum[length:] - csum[:-length]
+    hits = np.flatnonzero(run == length)
+    return int(hits[0]) if hits.size else -1

@@ -21,7 +21,7 @@ from footnav.pipeline.aiding.tof_types import RangeBatch, RangeOutputs, TofConfi
 from footnav.pipeline.gait.clearance import StrideClearanceTracker
 from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.navigation import eskf
-from footnav.pipeline.navigation.alignment import Alignment, align_from_still
+from footnav.pipeline.navigation.alignment import Alignment, align_from_still, first_quiet_run, quiet_samples
 from footnav.pipeline.navigation.batches import clip_variance, implausible_to_nan, nav_batch, zupt_ratio
 from footnav.pipeline.navigation.params import FilterParams
 from footnav.pipeline.navigation.profiles import G0_MPS2, UnitProfile, get_profile
@@ -313,6 +313,33 @@ class Navigator:
         if self.tof.active:
             self.tof.sync(self._x)
 
+    @property
+    def error_cov(self) -> F64 | None:
+        """Covariance (15, 15) of the error state [δp, δv, δθ, δb_a, δb_g] (``eskf``), or None before
+        alignment."""
+        return None if self._x is None else self._P[: eskf.N_STATE, : eskf.N_STATE].copy()
+
+    def update_error_state(self, h: F64, innovation: float, var: float) -> None:
+        """One external scalar update over the error state between batches: z = h δx + e,
+        e ~ N(0, ``var``), innovation ``innovation``, h (15,) over [δp, δv, δθ, δb_a, δb_g] (the
+        attitude error δθ in the navigation frame: δθ_z at index ``eskf.TH0 + 2`` turns the heading).
+        Joseph form, injection and reset as ``update_position``; for constraints between navigators
+        (``footnav.pipeline.two_feet.heading``); not used by one foot. No-op before alignment."""
+        if self._x is None:
+            return
+        h = np.asarray(h, dtype=np.float64)
+        u = np.ascontiguousarray(self._P[:, : eskf.N_STATE] @ h)
+        s = float(h @ u[: eskf.N_STATE]) + var
+        eskf.update1(self._x, self._P, u, s, float(innovation), np.empty(self._P.shape[0]))
+        if self.tof.active:
+            self.tof.sync(self._x)
+
+    def add_error_variance(self, index: int, var: float) -> None:
+        """Add ``var`` to the variance of error state ``index`` (process noise the filter's own model
+        lacks, added by a constraint between navigators); no-op before alignment."""
+        if self._x is not None:
+            self._P[index, index] += var
+
     def add_ranges(self, readings: RangeBatch) -> None:
         """Queue ToF readings; each is applied when the IMU samples reach its time (and, with a
         height-aided detector, gives the foot's height to the stance detection)."""
@@ -348,8 +375,10 @@ class Navigator:
         threshold = np.concatenate([t for _, _, t, _ in self._pending])
         still = np.concatenate([z for _, _, _, z in self._pending])
         need = max(2, round(self.config.align_s * self.rate_hz))
-        # (fewer samples than one quiet period cannot align; _quiet needs at least `need` of them)
-        start = _first_run(self._quiet(batch), need) if len(batch) >= need else -1
+        cfg = self.config
+        start = first_quiet_run(
+            batch.acc_b_mps2, batch.gyr_b_radps, need, cfg.align_max_rate_radps, cfg.align_max_acc_dev_mps2
+        )
         if start < 0:
             keep = round(self.config.max_wait_s * self.rate_hz)
             if len(batch) > keep:  # bound memory while the unit never rests
@@ -377,17 +406,10 @@ class Navigator:
     def _quiet(self, batch: ImuBatch) -> NDArray[np.bool_]:
         """Samples quiet enough to align on (see ``NavConfig``)."""
         cfg = self.config
-        norm_f = np.linalg.norm(batch.acc_b_mps2, axis=1)
-        rate = np.linalg.norm(batch.gyr_b_radps, axis=1)
         need = max(2, round(cfg.align_s * self.rate_hz))
-        kernel = np.ones(need) / need
-        # the centred window's mean |f|, normalised at the ends where the window is cut short
-        mean_f = np.convolve(norm_f, kernel, mode="same") / np.convolve(np.ones_like(norm_f), kernel, mode="same")
-        with np.errstate(invalid="ignore"):
-            quiet: NDArray[np.bool_] = (rate < cfg.align_max_rate_radps) & (
-                np.abs(norm_f - mean_f) < cfg.align_max_acc_dev_mps2
-            )
-        return quiet
+        return quiet_samples(
+            batch.acc_b_mps2, batch.gyr_b_radps, need, cfg.align_max_rate_radps, cfg.align_max_acc_dev_mps2
+        )
 
     def _run(self, batch: ImuBatch, stat: F64, threshold: F64, still: NDArray[np.bool_]) -> NavBatch:
         assert self._x is not None
@@ -453,6 +475,8 @@ class Navigator:
         assert self._x is not None
         n = still.shape[0]
         floor = np.empty(n)
+        # the last swing sample at or before each sample (−1: none in the batch), for each stance's floor below
+        last_swing = np.maximum.accumulate(np.where(still, -1, np.arange(n)))
         a = 0
         for b in [*self.levels.update_points(still), None]:  # None: the rest of the batch, with no update after it
             end = n if b is None else b
@@ -467,8 +491,8 @@ class Navigator:
                 self._x, self._P, z_level = self.levels.stance_update(self._x, self._P)
                 if self.level_updates is not None and math.isfinite(z_level):
                     self.level_updates.append((self.stats.samples_out + b - 1, z_level))
-                swing = np.flatnonzero(~still[:b])  # this stance's samples in the batch are on its level
-                floor[(int(swing[-1]) + 1 if swing.size else 0) : b] = self.levels.floor_z_m
+                if b > 0:  # this stance's samples in the batch are on its level
+                    floor[int(last_swing[b - 1]) + 1 : b] = self.levels.floor_z_m
             a = end
         return floor
 
@@ -537,17 +561,6 @@ class Navigator:
             due.t_s, due.sensor, due.status, heights, codes, innov, floors, hits[:, :3], hits[:, 3] == 1.0
         )
         return floor_z, floor_c, outputs
-
-
-def _first_run(mask: NDArray[np.bool_], length: int) -> int:
-    """Index of the first run of at least ``length`` True values in ``mask``, or −1."""
-    if mask.size < length:
-        return -1
-    # run[i] = Σ mask[i:i+length], exactly (integer prefix sums: O(n), not O(n · length))
-    csum = np.concatenate([[0], np.cumsum(mask, dtype=np.int64)])
-    run = csum[length:] - csum[:-length]
-    hits = np.flatnonzero(run == length)
-    return int(hits[0]) if hits.size else -1
 
 
 def navigate(

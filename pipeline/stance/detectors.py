@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+from footnav.pipeline.navigation._kernels_linalg import INTERNAL
 from numba import njit
 from numpy.typing import NDArray
 
@@ -89,9 +90,11 @@ class DetectorParams:
 
 
 _KIND_CODE: dict[str, int] = {"shoe": 0, "amv": 1, "amag": 2, "are": 3}
+_ZERO = np.int64(0)
+"""0 as an int64 for compiled calls: a literal 0 would compile the callee a second time, for that literal."""
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, **INTERNAL)
 def _pairwise_block(a: F64, lo: int, n: int) -> float:  # pragma: no cover - compiled
     """Σ a[lo:lo+n], n ≤ 128, in the order of numpy's pairwise summation (8 accumulators)."""
     if n < 8:
@@ -119,7 +122,7 @@ def _pairwise_block(a: F64, lo: int, n: int) -> float:  # pragma: no cover - com
     return res
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, **INTERNAL)
 def _pairwise_sum(a: F64, lo: int, n: int) -> float:  # pragma: no cover - compiled
     """Σ a[lo:lo+n] in the order of ``numpy.add.reduce`` over a contiguous axis (pairwise: blocks of
     at most 128 terms, halved at multiples of 8 above), so the compiled statistic reproduces the
@@ -196,7 +199,7 @@ def _statistic_kernel(
                 tmp[3 * j] = d0 * d0
                 tmp[3 * j + 1] = d1 * d1
                 tmp[3 * j + 2] = d2 * d2
-            acc_term = _pairwise_sum(tmp, 0, 3 * w)
+            acc_term = _pairwise_sum(tmp, _ZERO, 3 * w)
             if kind == 0:
                 dn = math.sqrt(0.0 + m0 * m0 + m1 * m1 + m2 * m2) - g
                 acc_term = acc_term + w * (dn * dn)
@@ -205,12 +208,12 @@ def _statistic_kernel(
                 a0, a1, a2 = acc[s + j, 0], acc[s + j, 1], acc[s + j, 2]
                 dn = math.sqrt(0.0 + a0 * a0 + a1 * a1 + a2 * a2) - g
                 tmp[j] = dn * dn
-            acc_term = _pairwise_sum(tmp, 0, w)
+            acc_term = _pairwise_sum(tmp, _ZERO, w)
         if kind in (0, 3):  # shoe, are: Σ|ω_j|²
             for j in range(w):
                 for c in range(3):
                     tmp[3 * j + c] = gyr[s + j, c] * gyr[s + j, c]
-            gyr_term = _pairwise_sum(tmp, 0, 3 * w)
+            gyr_term = _pairwise_sum(tmp, _ZERO, 3 * w)
         stat = (acc_term / sa2 + gyr_term / sg2) / w
         out[i] = stat if math.isfinite(stat) else math.inf
 
@@ -253,7 +256,7 @@ def statistic(acc_b_mps2: F64, gyr_b_radps: F64, window: int, p: DetectorParams)
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, **INTERNAL)
 def _quantile_sorted(v: F64, n: int, q: float) -> float:  # pragma: no cover - compiled
     """``numpy.quantile(v[:n], q)`` (method "linear") of sorted finite values, to the last bit."""
     virtual = (n - 1) * q
@@ -269,7 +272,7 @@ def _quantile_sorted(v: F64, n: int, q: float) -> float:  # pragma: no cover - c
     return a + diff * gamma
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, **INTERNAL)
 def _sort_in_place(a: F64) -> None:  # pragma: no cover - compiled
     """Shell sort (Ciura's gaps) of a short array: as fast as ``np.sort`` at ~100 values and much
     quicker for numba to compile."""
@@ -284,7 +287,7 @@ def _sort_in_place(a: F64) -> None:  # pragma: no cover - compiled
             a[j] = v
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, **INTERNAL)
 def _merge_sorted(vals: F64, n: int, rem: F64, add: F64, out: F64) -> int:  # pragma: no cover - compiled
     """out[:m] = vals[:n] − rem + add, sorted, for sorted finite ``vals``, ``rem`` (a sub-multiset of
     vals[:n]) and ``add``; returns m. One pass whose rare branches (a removal, an insertion) predict

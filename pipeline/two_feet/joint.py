@@ -18,6 +18,7 @@ import numpy as np
 from footnav.pipeline.nav_types import NavBatch, concat_batches
 from footnav.pipeline.navigation.navigator import NavConfig, Navigator, NavStats
 from footnav.pipeline.samples import ImuBatch
+from footnav.pipeline.two_feet.heading import HeadingCoupler
 from footnav.pipeline.two_feet.separation import FootSeparation, apply_separation
 from numpy.typing import NDArray
 
@@ -58,6 +59,10 @@ class TwoFeetResult:
         times (s) at which the bound was violated and applied.
     distance_before_m
         the horizontal distance before each of those corrections, m.
+    heading_updates
+        times (s) at which the relative heading constraint was applied.
+    heading_innovation_rad, heading_sigma_rad
+        its innovation y and its 1σ (σ_ψ and the turn mismatch m) at each of them, rad.
     """
 
     left: NavBatch | None
@@ -66,6 +71,9 @@ class TwoFeetResult:
     right_stats: NavStats
     corrections: list[float] = field(default_factory=list)
     distance_before_m: list[float] = field(default_factory=list)
+    heading_updates: list[float] = field(default_factory=list)
+    heading_innovation_rad: list[float] = field(default_factory=list)
+    heading_sigma_rad: list[float] = field(default_factory=list)
 
 
 def navigate_feet(
@@ -112,17 +120,25 @@ def navigate_feet(
     edges[-1] = math.inf
     cut_l = np.searchsorted(left.t_s, edges, side="left")
     cut_r = np.searchsorted(right.t_s, edges, side="left")
+    heading = None if coupling is None or coupling.heading is None else HeadingCoupler(coupling.heading)
     for k in range(n_steps):
-        for nav, batch, cut, out in ((nav_l, bl, cut_l, out_l), (nav_r, br, cut_r, out_r)):
+        latest: list[NavBatch | None] = [None, None]
+        for i, (nav, batch, cut, out) in enumerate(((nav_l, bl, cut_l, out_l), (nav_r, br, cut_r, out_r))):
             if cut[k + 1] > cut[k]:
                 est = nav.process(batch.select(slice(int(cut[k]), int(cut[k + 1]))))
                 if est is not None:
                     out.append(est)
+                    latest[i] = est
+        if heading is not None:
+            heading.after_batch(nav_l, latest[0], nav_r, latest[1])
         if coupling is not None:
             d = apply_separation(nav_l, nav_r, coupling)
             if math.isfinite(d):
                 result.corrections.append(float(edges[k + 1]) if k + 1 < n_steps else t1)
                 result.distance_before_m.append(d)
+    if heading is not None:
+        result.heading_updates, result.heading_innovation_rad = heading.times_s, heading.innovations_rad
+        result.heading_sigma_rad = heading.sigmas_rad
     result.left = concat_batches(out_l) if out_l else None
     result.right = concat_batches(out_r) if out_r else None
     return result
