@@ -168,6 +168,8 @@ class RerunLogger:
         batching period of the thread.
     dual_runs
         dual-IMU boards that :meth:`log_dual` will be given (blueprint: trails and a plot).
+    verify_writes
+        wait for each flush to be written; after a failure (a full disk: ``stats.error``) discard what comes.
 
     Raises
     ------
@@ -189,6 +191,7 @@ class RerunLogger:
         dual_runs: Sequence[str] = (),
         tof: bool = False,
         truth: bool = False,
+        verify_writes: bool = False,
     ) -> None:
         if not sinks:
             raise ValueError("RerunLogger needs at least one sink (a viewer or a file); none were given")
@@ -204,7 +207,7 @@ class RerunLogger:
         self._ellipsoid_every = ellipsoid_every
         self._series_every = series_every
         self._max_queued = max_queued_samples
-        self._flush_period_s = flush_period_s
+        self._flush_period_s, self._verify_writes, self._write_failed = flush_period_s, verify_writes, False
         self.stats = LoggerStats()
 
         self.recording = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
@@ -220,12 +223,11 @@ class RerunLogger:
         self._foot_samples: dict[str, int] = dict.fromkeys(self.feet, 0)
         self._floor_logged = False
         self._lines: dict[str, plan.DecimatedLine] = {f: plan.DecimatedLine([]) for f in self.feet}
-        self._grid: tuple[float, float, float, float] | None = None
+        self._grid: tuple[float, float, float, float] | None = None  # the plan view's grid bounds, plan axes, m
         self._truths: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
         """Per foot: the ground truth's times (n,) and positions (n, 3), once logged."""
         self._heading_deg: dict[str, float] = {}
         """Per foot: the last heading logged, degrees (the plot is a continuous turn)."""
-        """The plan view's grid bounds, plan axes, m (``footnav.views.plan.grid_bounds``)."""
         self._steps: dict[str, int] = dict.fromkeys(self.feet, 0)
         self._tof_totals: dict[str, np.ndarray] = {}
         """Per foot: ToF readings since the start [used, gated, invalid status] (``convert.tof_columns``)."""
@@ -239,8 +241,7 @@ class RerunLogger:
 
         With ``timeout_s == 0`` (the default) this never blocks: safe on the event loop.
         """
-        if foot not in self._paths:
-            raise ValueError(f"foot {foot!r} was not declared; this logger has feet={self.feet}")
+        self._check_foot(foot)
         n = len(nav)
         if n == 0:
             return True
@@ -261,6 +262,10 @@ class RerunLogger:
         self._queue.put(_Nav(foot, nav))
         return True
 
+    def _check_foot(self, foot: str) -> None:
+        if foot not in self._paths:
+            raise ValueError(f"foot {foot!r} was not declared; this logger has feet={self.feet}")
+
     def _has_room(self, n: int) -> bool:
         return self._queued + n <= self._max_queued
 
@@ -278,16 +283,14 @@ class RerunLogger:
 
     def log_truth(self, pos_n_m: NDArray[np.float64], *, t_s: NDArray[np.float64], foot: str = DEFAULT_FOOT) -> None:
         """Log a ground-truth track: positions (n, 3), m, at device times (n,), s. Never blocks."""
-        if foot not in self._paths:
-            raise ValueError(f"foot {foot!r} was not declared; this logger has feet={self.feet}")
+        self._check_foot(foot)
         if not self._closed:
             self._queue.put(_Truth(foot, np.asarray(t_s, np.float64), np.asarray(pos_n_m, np.float64)))
 
     def log_swing_clearance(self, series: ClearanceSeries, *, foot: str = DEFAULT_FOOT) -> None:
         """Log whole-swing clearance values that came after the foot's last batch (the session's end:
         ``GaitEventTracker.finish``). Never blocks."""
-        if foot not in self._paths:
-            raise ValueError(f"foot {foot!r} was not declared; this logger has feet={self.feet}")
+        self._check_foot(foot)
         if not self._closed:
             self._queue.put(_SwingRest(foot, series))
 
@@ -303,8 +306,7 @@ class RerunLogger:
     ) -> None:
         """Log link health at device time ``t_s``: samples received per second of host time, the rate by
         the unit's clock (NaN: not measured yet), cumulative lost packets and reconnects. Never blocks."""
-        if foot not in self._paths:
-            raise ValueError(f"foot {foot!r} was not declared; this logger has feet={self.feet}")
+        self._check_foot(foot)
         if not self._closed:
             self._queue.put(_Link(foot, t_s, rate_hz, lost_packets, reconnects, clock_rate_hz))
 
@@ -397,6 +399,17 @@ class RerunLogger:
         self._guarded(self._send_lines, True)
         self._guarded(self._finish)
 
+    def _check_written(self) -> bool:
+        """Wait for the sinks to write; True if they failed: the error is kept and the stream parked (sends to
+        a file sink whose writer died may block for good), what comes goes to a disabled stream."""
+        try:
+            self.recording.flush(timeout_sec=CLOSE_TIMEOUT_S)
+        except Exception as exc:
+            self._write_failed, self.stats.error = True, self.stats.error or exc
+            _STALLED_RECORDINGS.append(self.recording)
+            self.recording = rr.RecordingStream(APPLICATION_ID, recording_id=self.recording_id, default_enabled=False)
+        return self._write_failed
+
     def _send_apart(self, item: _Dual | _Truth | _SwingRest) -> None:
         """The items sent as they come, not held for the next flush."""
         if isinstance(item, _Dual):
@@ -447,9 +460,10 @@ class RerunLogger:
             events.clear()
         if n_done:
             self._guarded(self._send_lines, False)
-        if n_done:
             self.stats.sends += 1
             self.stats.send_seconds += time.perf_counter() - start
+        if self._verify_writes:
+            self._check_written()
 
     def _send_nav(self, foot: str, nav: NavBatch) -> None:
         paths = self._paths[foot]
@@ -570,8 +584,9 @@ class RerunLogger:
             self.recording.send_columns(path, indexes=[index], columns=columns)
 
     def _finish(self) -> None:
-        self.recording.flush(timeout_sec=CLOSE_TIMEOUT_S)
-        self.recording.disconnect()
+        if not (self._verify_writes and self._check_written()):
+            self.recording.flush(timeout_sec=CLOSE_TIMEOUT_S)
+            self.recording.disconnect()
 
     def _guarded(self, fn: Callable[..., None], *args: object) -> None:
         try:

@@ -9,7 +9,6 @@ until its data reaches the recording's last time, give the views a few frames, t
 
 from __future__ import annotations
 
-import os
 import shutil
 import socket
 import subprocess
@@ -17,6 +16,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from footnav.views.rerun_env import VIEWER_FLAGS, rerun_environment
 from footnav.views.sinks import LOOPBACK, viewer_binary
 
 LAVAPIPE_ICD = Path("/usr/share/vulkan/icd.d/lvp_icd.x86_64.json")
@@ -74,9 +74,9 @@ def screenshot(
 
     port = _free_port()
     home = tempfile.mkdtemp(prefix="footnav-viewer-")  # a fresh viewer: no saved layout or settings
-    env = {**os.environ, "HOME": home, "XDG_CONFIG_HOME": home, "XDG_DATA_HOME": home}
+    env = rerun_environment(Path(home))
     cmd = [str(viewer_binary()), "--headless", "--bind", LOOPBACK, "--port", str(port)]
-    cmd += ["--window-size", f"{size[0]}x{size[1]}", "--hide-welcome-screen"]
+    cmd += ["--window-size", f"{size[0]}x{size[1]}", *VIEWER_FLAGS]
     viewer = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
     try:
         deadline = time.monotonic() + timeout_s

@@ -4,6 +4,9 @@ Everything listens on 127.0.0.1 only: the viewer is started from the installed r
 (``rerun_cli/rerun``, the same version as the SDK) with ``--bind 127.0.0.1`` rather than through
 ``rr.spawn``, which binds 0.0.0.0. Without a display (no ``DISPLAY``/``WAYLAND_DISPLAY``) no viewer
 is started — spawning one there stalls for ~11 s and loses data — and the session is saved instead.
+Every viewer runs in the environment of :mod:`footnav.views.rerun_env` (no analytics, no outbound
+connection, its files in a private folder). A recording file cut short (a full disk) is trimmed to
+its last whole message by :func:`trim_rrd`, so Rerun's readers read it.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from pathlib import Path
 
 import rerun as rr
 from footnav.pipeline.errors import FootnavError
+from footnav.views.rerun_env import VIEWER_FLAGS, private_folder, rerun_environment
 from rerun.sinks import LogSinkLike
 
 LOOPBACK = "127.0.0.1"
@@ -79,12 +83,15 @@ def spawn_viewer(
     server_memory_limit: str = VIEWER_SERVER_MEMORY_LIMIT,
     timeout_s: float = VIEWER_START_TIMEOUT_S,
     env: Mapping[str, str] | None = None,
+    folder: Path | None = None,
 ) -> tuple[str, subprocess.Popen[bytes]]:
     """Start a native viewer listening on 127.0.0.1 and wait until it accepts connections.
 
     Blocks up to ``timeout_s``: call it before the event loop starts, or through ``asyncio.to_thread``.
-    The viewer runs in its own session so it outlives footnav (the user closes it). ``env`` replaces
-    the viewer's environment (default: inherited).
+    The viewer runs in its own session so it outlives footnav (the user closes it). Its environment
+    is ``env`` (default: inherited) made private by
+    :func:`~footnav.views.rerun_env.rerun_environment` in ``folder`` (default: a new
+    :func:`~footnav.views.rerun_env.private_folder`, left for the viewer, which outlives footnav).
 
     Returns
     -------
@@ -106,6 +113,7 @@ def spawn_viewer(
         "--memory-limit", memory_limit,
         "--server-memory-limit", server_memory_limit,
         "--expect-data-soon",
+        *VIEWER_FLAGS,
     ]  # fmt: skip
     proc = subprocess.Popen(
         cmd,
@@ -113,7 +121,7 @@ def spawn_viewer(
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         start_new_session=True,
-        env=None if env is None else dict(env),
+        env=rerun_environment(folder or private_folder(), env),
     )
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -154,12 +162,16 @@ def serve_web_viewer(
     server_memory_limit: str = VIEWER_SERVER_MEMORY_LIMIT,
     timeout_s: float = WEB_VIEWER_START_TIMEOUT_S,
     web_port: int | None = None,
+    folder: Path,
 ) -> tuple[str, str, subprocess.Popen[bytes]]:
     """Host the Rerun web viewer and its gRPC proxy on 127.0.0.1 (the viewer binary, ``--serve-web``).
 
     ``rr.serve_web_viewer``/``rr.serve_grpc`` would bind 0.0.0.0; the CLI with ``--bind`` does not.
-    The server runs in its own session and outlives footnav so the page keeps working; it buffers
-    at most ``server_memory_limit`` for late browsers.
+    Loopback is not private: any process of any user on this machine can open both ports while the
+    server runs (there is no token). The server runs in its own session (its process group is the
+    server alone: :func:`stop_process` ends it); it buffers at most ``server_memory_limit`` for late
+    browsers. It runs in the environment of
+    :func:`~footnav.views.rerun_env.rerun_environment` in ``folder``.
 
     Returns
     -------
@@ -191,6 +203,7 @@ def serve_web_viewer(
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         start_new_session=True,
+        env=rerun_environment(folder),
     )
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -207,6 +220,62 @@ def serve_web_viewer(
         f"the Rerun web viewer did not open ports {grpc_port}/{web_port} within {timeout_s:.0f} s; "
         "use --save FILE.rrd and open the file later"
     )
+
+
+def stop_process(proc: subprocess.Popen[bytes], timeout_s: float = 5.0) -> None:
+    """End a process footnav started (SIGTERM, then SIGKILL after ``timeout_s``) and reap it."""
+    if proc.poll() is not None:
+        return
+    proc.terminate()
+    try:
+        proc.wait(timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(timeout_s)
+
+
+RRD_STREAM_HEADER_BYTES = 12
+"""An .rrd file starts with ``RRF2``, 4 bytes of format version and 4 of options."""
+RRD_MESSAGE_HEADER_BYTES = 16
+"""Each message follows: its kind and its payload length, two little-endian u64, then the payload."""
+
+
+def trim_rrd(path: Path) -> int:
+    """Cut a recording file whose writing stopped mid-message back to its last whole message.
+
+    Rerun's file writer that fails (a full disk) leaves a partial message at the end, and
+    ``RrdReader(path).stream()`` refuses the whole file for it ("Message payload … exceeds file
+    size"); without it the file reads as one whose writer was stopped. The messages are walked by
+    their headers only (:data:`RRD_MESSAGE_HEADER_BYTES`); an end marker (kind 0: the footer follows)
+    ends the walk with the file untouched.
+
+    Returns
+    -------
+    int
+        The bytes kept (the file's size if it was whole, 0 if it is not a regular .rrd file).
+    """
+    try:
+        size = path.stat().st_size
+        if not path.is_file() or size < RRD_STREAM_HEADER_BYTES:
+            return 0
+        with open(path, "r+b") as f:
+            if f.read(4) != b"RRF2":
+                return 0
+            end = RRD_STREAM_HEADER_BYTES
+            while end + RRD_MESSAGE_HEADER_BYTES <= size:
+                f.seek(end)
+                header = f.read(RRD_MESSAGE_HEADER_BYTES)
+                kind, length = int.from_bytes(header[:8], "little"), int.from_bytes(header[8:], "little")
+                if kind == 0:
+                    return size
+                if end + RRD_MESSAGE_HEADER_BYTES + length > size:
+                    break
+                end += RRD_MESSAGE_HEADER_BYTES + length
+            if end < size:
+                f.truncate(end)
+            return end
+    except OSError:
+        return 0
 
 
 def check_writable(path: Path) -> str | None:

@@ -27,10 +27,12 @@ from footnav.app.feet import (
     ONBOARD_INS_STATES,
     ONBOARD_TITLES,
     FootRun,
+    close_lsl_outlets,
     dual_view_sink,
     foot_run,
     foot_sinks,
     notice,
+    open_lsl_outlets,
     rate_reporter,
 )
 from footnav.app.session import CalibrationLookup, run_unit_session, unit_mode
@@ -48,6 +50,7 @@ from footnav.device.unit import OpenShoeUnit
 from footnav.pipeline.dual_imu.navigator import DualNavigator
 from footnav.pipeline.errors import FootnavError, InputFormatError
 from footnav.pipeline.runner import NavSink
+from footnav.views.lsl import LslRequest, lsl_feet
 from footnav.views.outputs import open_session_views
 
 FULL_SPEED_JOIN_SAMPLES = 1000
@@ -104,6 +107,9 @@ class ReplayOptions:
         inertial-only, to measure what the ToF sensors add).
     stance
         stance detector mode with ToF units (None: as recorded in the capture).
+    lsl
+        ``--lsl``: the estimates on Lab Streaming Layer too (:mod:`footnav.views.lsl`), each foot
+        as from a unit ``replay:<its captured port>``.
     """
 
     path: Path
@@ -118,6 +124,7 @@ class ReplayOptions:
     collect: Callable[[str], NavSink] | None = None
     tof: bool = True
     stance: str | None = None
+    lsl: LslRequest | None = None
 
 
 def checked_summary(opts: ReplayOptions) -> CaptureSummary:
@@ -141,12 +148,15 @@ def checked_summary(opts: ReplayOptions) -> CaptureSummary:
             f"{opts.path} is a calibration procedure (raw IMU output); refit it with "
             f"`footnav calibrate --capture {opts.path}`"
         )
-    if summary.corrupt_at is not None:
+    for warning in info.warnings:
+        notice(warning)
+    if summary.gaps:
+        spans = ", ".join(f"{g.start}-{g.end}" for g in summary.gaps)
         notice(
-            f"{opts.path} is corrupt after byte {summary.corrupt_at} of {opts.path.stat().st_size}: "
-            "replaying what comes before"
+            f"{opts.path} has {len(summary.gaps)} damaged stretch(es) (bytes {spans} of {opts.path.stat().st_size} "
+            "fail their CRC check): the replay skips each and resumes at the next intact chunk"
         )
-    elif summary.truncated:
+    if summary.truncated:
         notice(f"{opts.path} ends mid-record (the writer was killed or the disk was full): replaying what is there")
     return summary
 
@@ -253,6 +263,13 @@ def run_replay(opts: ReplayOptions) -> int:
         if isinstance(u.settings.get("dual_imu_lever_b_m"), list)
     }
     onboard_of = onboard_outputs(summary, windowed=windowed)
+    lsl_streams = lsl_feet(
+        opts.lsl,
+        {u.foot: f"replay:{u.port}" for u in info.units},
+        units={u.foot: u.unit for u in info.units},
+        rates={foot: 0.0 if onboard_of.get(foot) == "steps" else rate_of.get(foot, 1000.0) for foot in feet},
+    )
+    lsl = open_lsl_outlets(lsl_streams, wait_s=opts.lsl.wait_s if opts.lsl else 0.0)
     views, notes = open_session_views(
         save=opts.save,
         want_viewer=opts.viewer,
@@ -286,7 +303,14 @@ def run_replay(opts: ReplayOptions) -> int:
             onboard=onboard_of.get(foot),
         )
         navigator = run.navigator
-        foot_sinks(run, views, status, two_feet=len(feet) > 1, put_timeout_s=0.0 if realtime else REPLAY_PUT_TIMEOUT_S)
+        foot_sinks(
+            run,
+            views,
+            status,
+            two_feet=len(feet) > 1,
+            put_timeout_s=0.0 if realtime else REPLAY_PUT_TIMEOUT_S,
+            lsl=lsl,
+        )
         if views is not None and isinstance(navigator, DualNavigator):
             run.sinks.append(dual_view_sink(navigator, views, foot))
         if opts.collect is not None:
@@ -353,11 +377,39 @@ def run_replay(opts: ReplayOptions) -> int:
         if views is not None:
             for note in views.close():
                 notice(note)
+        close_lsl_outlets(lsl)
     if interrupted:
         print("interrupted: the recording was closed", file=sys.stderr)
     print_results(opts, summary, runs, links, status)
     check_window_reached(opts, runs, interrupted=interrupted)
     return 130 if interrupted else 0  # 130: the shell's code for Ctrl-C (SIGINT)
+
+
+def damage_report(opts: ReplayOptions, summary: CaptureSummary, run: FootRun, link: CaptureReplayLink) -> list[str]:
+    """What one foot's replay lost to damaged stretches of the capture: one line per stretch (its
+    bytes, how long the stream went without data and from when), then the samples lost: against the
+    live session's count (its ``end`` event) where the capture holds it, else by package numbers."""
+    lines = []
+    size = opts.path.stat().st_size
+    for lost in link.lost:
+        where = f"{opts.path.name}: bytes {lost.gap.start}-{lost.gap.end} of {size} are damaged and were skipped; "
+        if lost.seconds is None:
+            lines.append(where + "nothing of this unit comes after them")
+            continue
+        since = ""
+        if lost.before_ns is not None and summary.first_ns is not None:
+            since = f" (from {(lost.before_ns - summary.first_ns) / 1e9:.2f} s into the capture)"
+        lines.append(where + f"no data for {lost.seconds:.2f} s{since}")
+    if link.lost:
+        ends = [e.get("samples") for e in summary.events.get(run.foot, []) if e.get("event") == "end"]
+        got = run.result.samples_received
+        if ends and isinstance(ends[0], int) and ends[0] >= got:
+            missing = f"{ends[0] - got} samples lost ({got} of the {ends[0]} the live session navigated)"
+        else:
+            numbers = run.result.link.lost_packets if run.result.link is not None else 0
+            missing = f"{numbers} packets lost by their package numbers"
+        lines.append(f"{len(link.lost)} damaged stretch(es) skipped: {missing}")
+    return lines
 
 
 def print_results(
@@ -367,13 +419,10 @@ def print_results(
     links: dict[str, CaptureReplayLink],
     status: StatusLine,
 ) -> None:
-    """Corruption the replay found itself, and each foot's samples and distance."""
-    corrupt = [link.state.corrupt_at for link in links.values() if link.state.corrupt_at is not None]
-    if corrupt and summary.corrupt_at is None:  # found by the replay itself (the index looked whole)
-        notice(
-            f"{opts.path} is corrupt after byte {min(corrupt)} of {opts.path.stat().st_size}: "
-            "replayed what comes before"
-        )
+    """Damaged stretches the replay skipped, and each foot's samples and distance."""
+    for run in runs:
+        for line in damage_report(opts, summary, run, links[run.foot]):
+            notice((f"{run.foot}: " if len(runs) > 1 else "") + line)
     for run in runs:
         prefix = f"{run.foot}: " if len(runs) > 1 else ""
         st = run.navigator.stats

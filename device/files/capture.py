@@ -41,12 +41,18 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import IO, Any, Final, Literal
 
+from footnav.device.files.capture_header import apply_policy, sealed, verify
+from footnav.device.files.capture_records import (
+    Gap,
+    RawMetadata,
+    capture_records,
+    summary_crc_ok,
+)
+from footnav.device.files.capture_records import RecordState as ReadState
 from footnav.device.files.capture_schema import check_session, checked_unit_fields
 from footnav.pipeline.errors import InputFormatError
-from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
-from mcap.records import Channel, Header, Message, Metadata
-from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Header, Message
 from mcap.writer import CompressionType, IndexType, Writer
 
 log = logging.getLogger(__name__)
@@ -67,8 +73,6 @@ MCAP_MAGIC: Final = b"\x89MCAP0\r\n"
 """The first bytes of every MCAP file."""
 _BYTES: Final = "application/octet-stream"
 _JSON: Final = "application/json"
-_RECORD_SIZE_LIMIT: Final = 1 << 26
-"""No record footnav writes comes near this (chunks close at 256 KiB); a larger length is corruption."""
 EXPECTED: Final = "a footnav capture (.mcap, MCAP profile 'footnav')"
 
 Direction = Literal["rx", "tx"]
@@ -211,7 +215,7 @@ class CaptureWriter:
             "monotonic_to_unix_ns": str(self._mono_to_wall_ns),
         }
         meta.update(session or {})
-        self._writer.add_metadata("footnav.session", meta)
+        self._writer.add_metadata("footnav.session", sealed("footnav.session", meta))
         self._writer.flush()
         self._period = flush_period_s
         self._stop = threading.Event()
@@ -219,9 +223,17 @@ class CaptureWriter:
         self._flusher.start()
 
     def add_unit(self, header: UnitHeader) -> CaptureTap:
-        """Declare a unit and return its tap ``tap(direction, host_ns, data)`` for ``OpenShoeUnit``."""
+        """Declare a unit and return its tap ``tap(direction, host_ns, data)`` for ``OpenShoeUnit``.
+
+        Raises
+        ------
+        ValueError
+            a unit of this foot name was declared already (its bytes would merge into one stream).
+        """
+        if any(foot == header.foot for foot, _ in self._channels):
+            raise ValueError(f"two units named {header.foot!r} in one capture: each unit needs its own foot name")
         with self._lock:
-            self._writer.add_metadata("footnav.unit", header.to_metadata())
+            self._writer.add_metadata("footnav.unit", sealed("footnav.unit", header.to_metadata()))
             for direction in ("rx", "tx"):
                 self._channels[(header.foot, direction)] = self._writer.register_channel(
                     f"{header.foot}/{direction}", _BYTES, 0, {"direction": direction, "foot": header.foot}
@@ -337,11 +349,15 @@ class CaptureInfo:
         ``footnav.session`` metadata.
     units
         one header per unit, in the order they were declared.
+    warnings
+        header values that failed their checksum and were replaced by a default, each named (see
+        ``footnav.device.files.capture_header``).
     """
 
     path: Path
     session: dict[str, str]
     units: tuple[UnitHeader, ...]
+    warnings: tuple[str, ...] = ()
 
     @property
     def feet(self) -> tuple[str, ...]:
@@ -358,19 +374,6 @@ class CaptureMessage:
     data: bytes
 
 
-@dataclass(slots=True)
-class ReadState:
-    """How a pass over a capture ended (filled in as :func:`iter_capture` goes)."""
-
-    truncated: bool = False
-    """The file ended inside a record (a crashed or still-running writer), or a record was corrupt:
-    everything before it was read."""
-    corrupt_at: int | None = None
-    """File offset of the last good record before an unreadable one that was not at the end."""
-    bytes_read: int = 0
-    size: int = 0
-
-
 def _check_magic(path: Path) -> None:
     try:
         with open(path, "rb") as f:
@@ -382,79 +385,108 @@ def _check_magic(path: Path) -> None:
         raise InputFormatError(f"{path} is {what}; expected {EXPECTED}")
 
 
-def _mcap_records(f: IO[bytes], path: Path, state: ReadState, header_read: Callable[[], bool]) -> Iterator[Any]:
-    """The MCAP records of the open file ``f``, ``state.bytes_read`` kept up to date. A record that
-    does not decode ends them (``state.truncated``; ``state.corrupt_at`` unless it was the end of the
-    file), or raises :class:`InputFormatError` while ``header_read()`` is False."""
-    records = StreamReader(f, record_size_limit=_RECORD_SIZE_LIMIT, validate_crcs=True).records
-    while True:
-        try:
-            rec = next(records)
-        except StopIteration:
-            return
-        except Exception as exc:  # a corrupt file makes the MCAP and zstd decoders raise many kinds
-            if not header_read():
+def _first_data_lost(path: Path, gap: Gap) -> InputFormatError:
+    return InputFormatError(
+        f"{path} is corrupt: bytes {gap.start} to {gap.end}, before its first message, do not decode (its first "
+        "chunk of data, which holds the unit's answer to the start command, fails its CRC check); expected a "
+        f"footnav capture whose header and first chunk are intact"
+    )
+
+
+class _Header:
+    """The header records of a capture as they are read (see :func:`iter_capture`)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.session: dict[str, str] | None = None
+        self.units: list[UnitHeader] = []
+        self.warnings: list[str] = []
+        self.recover_offset = False
+
+    def add(self, raw: RawMetadata) -> None:
+        record = verify(raw)
+        if record.name == "footnav.session":
+            values, warnings = apply_policy(self.path, record, "session")
+            check_session(self.path, values, FORMAT_VERSION)
+            self.session = values
+            self.recover_offset = "monotonic_to_unix_ns" not in values and any("monotonic" in w for w in warnings)
+        elif record.name == "footnav.unit":
+            label = f"unit {record.metadata.get('foot', '?')!r}"
+            values, warnings = apply_policy(self.path, record, label)
+            unit = UnitHeader.checked(self.path, values)
+            if unit.foot in (u.foot for u in self.units):
                 raise InputFormatError(
-                    f"{path} is not readable as MCAP ({type(exc).__name__}: {exc}); expected {EXPECTED}"
-                ) from exc
-            state.truncated = True
-            if not isinstance(exc, (EndOfFile, EOFError)):  # not the end of the file: corruption
-                state.corrupt_at = state.bytes_read
+                    f"{self.path}: capture metadata: two units are named {unit.foot!r}; expected one foot name per unit"
+                )
+            self.units.append(unit)
+        else:
             return
-        state.bytes_read = f.tell()
-        yield rec
+        self.warnings.extend(warnings)
+
+    def info(self, first: Message | None) -> CaptureInfo:
+        if self.session is None:
+            raise InputFormatError(f"{self.path} has no footnav.session header; expected {EXPECTED}")
+        if self.recover_offset and first is not None:
+            self.session["monotonic_to_unix_ns"] = str(first.log_time - first.publish_time)
+        return CaptureInfo(self.path, self.session, tuple(self.units), tuple(self.warnings))
 
 
 def iter_capture(path: Path, state: ReadState | None = None) -> Iterator[CaptureMessage | CaptureInfo]:
     """Every record of a capture in file order: a :class:`CaptureInfo` once the header has been read
     (before the first message), then the messages.
 
-    Stops quietly at the end of a truncated file and sets ``state.truncated``.
+    A damaged stretch of the data is skipped to the next intact chunk and appended to
+    ``state.gaps`` (the first message after it follows); the end of a truncated file stops the pass
+    quietly and sets ``state.truncated``.
 
     Raises
     ------
     InputFormatError
-        not an MCAP file, an MCAP file from another tool, or a header that does not fit the schema
-        (``footnav.device.files.capture_schema``).
+        not an MCAP file, an MCAP file from another tool, a header that does not fit the schema
+        (``footnav.device.files.capture_schema``) or whose damaged value cannot be replaced
+        (``footnav.device.files.capture_header``), two units of one name, or data lost before the
+        first message.
     """
     path = Path(path)
     _check_magic(path)
     state = state if state is not None else ReadState()
-    state.size = path.stat().st_size
-    session: dict[str, str] | None = None
-    units: list[UnitHeader] = []
+    header = _Header(path)
     channels: dict[int, tuple[str, str]] = {}
     announced = False
     with open(path, "rb") as f:
-        # the header is read once ``session`` is set (late binding wanted)
-        for rec in _mcap_records(f, path, state, header_read=lambda: session is not None):  # noqa: B023
+        records = capture_records(f, state, strict=lambda: header.session is None)
+        while True:
+            try:
+                rec = next(records)
+            except StopIteration:
+                break
+            except ValueError as exc:
+                raise InputFormatError(f"{path} is not readable as MCAP ({exc}); expected {EXPECTED}") from exc
             if isinstance(rec, Header):
                 if rec.profile != PROFILE:
                     raise InputFormatError(
                         f"{path} is an MCAP file from another tool (profile {rec.profile!r}, "
                         f"library {rec.library!r}); expected {EXPECTED}"
                     )
-            elif isinstance(rec, Metadata):
-                if rec.name == "footnav.session":
-                    session = dict(rec.metadata)
-                    check_session(path, session, FORMAT_VERSION)
-                elif rec.name == "footnav.unit":
-                    units.append(UnitHeader.checked(path, dict(rec.metadata)))
+            elif isinstance(rec, RawMetadata):
+                header.add(rec)
             elif isinstance(rec, Channel):
                 foot, _, direction = rec.topic.rpartition("/")
                 channels[rec.id] = (foot, direction)
             elif isinstance(rec, Message):
                 if not announced:
-                    if session is None:
-                        raise InputFormatError(f"{path} has no footnav.session header; expected {EXPECTED}")
+                    if state.gaps:
+                        raise _first_data_lost(path, state.gaps[0])
                     announced = True
-                    yield CaptureInfo(path, session, tuple(units))
+                    yield header.info(rec)
                 foot, direction = channels.get(rec.channel_id, ("?", "?"))
                 yield CaptureMessage(foot, direction, rec.publish_time, bytes(rec.data))
     if not announced:
-        if session is None:
+        if state.gaps:
+            raise _first_data_lost(path, state.gaps[0])
+        if header.session is None:
             raise InputFormatError(f"{path} ends before its footnav.session header; expected {EXPECTED}")
-        yield CaptureInfo(path, session, tuple(units))
+        yield header.info(None)
 
 
 def read_capture_info(path: Path) -> CaptureInfo:
@@ -484,7 +516,10 @@ class CaptureSummary:
     rx_sha256: dict[str, str] = field(default_factory=dict)
     """SHA-256 (hex) of each unit's device -> host bytes in capture order."""
     corrupt_at: int | None = None
-    """File offset where an unreadable record stopped the pass before the end (see ``ReadState``)."""
+    """File offset of the first damaged stretch the pass skipped (see ``ReadState``), or None."""
+    gaps: tuple[Gap, ...] = ()
+    """Every damaged stretch the pass skipped (file offsets); the index of a cleanly closed capture
+    finds none (the replay finds them as it reads)."""
 
     @property
     def duration_s(self) -> float:
@@ -527,7 +562,7 @@ def summarize_capture(path: Path, *, full: bool = False) -> CaptureSummary:
             last = item.host_ns
     assert info is not None
     sha = {foot: d.hexdigest() for foot, d in digests.items()}
-    return CaptureSummary(info, state.truncated, first, last, rx, events, sha, state.corrupt_at)
+    return CaptureSummary(info, state.truncated, first, last, rx, events, sha, state.corrupt_at, tuple(state.gaps))
 
 
 def _summary_from_index(path: Path) -> CaptureSummary | None:
@@ -535,6 +570,9 @@ def _summary_from_index(path: Path) -> CaptureSummary | None:
     info = read_capture_info(path)  # checks magic and profile, reads the metadata
     try:
         with open(path, "rb") as f:
+            if not summary_crc_ok(f):  # a damaged index: the counts come from the data instead
+                return None
+            f.seek(0)
             reader = make_reader(f)
             summary = reader.get_summary()
             if summary is None or summary.statistics is None:

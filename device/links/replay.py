@@ -13,11 +13,38 @@ import json
 import time
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from footnav.device.files.capture import CaptureInfo, CaptureMessage, ReadState, iter_capture
+from footnav.device.files.capture_records import Gap
 from footnav.pipeline.errors import InputFormatError
+
+
+@dataclass(frozen=True, slots=True)
+class LostStretch:
+    """A damaged stretch of a capture as one unit's replay met it.
+
+    Attributes
+    ----------
+    gap
+        the file offsets skipped.
+    before_ns, after_ns
+        host time (``time.monotonic_ns()`` as captured) of the unit's last read before the stretch
+        and its first read after it (None: none before, or the capture ended).
+    """
+
+    gap: Gap
+    before_ns: int | None
+    after_ns: int | None
+
+    @property
+    def seconds(self) -> float | None:
+        """How long the unit's stream went without a read across the stretch, s (None: unknown)."""
+        if self.before_ns is None or self.after_ns is None:
+            return None
+        return (self.after_ns - self.before_ns) / 1e9
 
 
 class CaptureReplayLink:
@@ -64,6 +91,10 @@ class CaptureReplayLink:
         self.events: list[dict[str, Any]] = []
         """Events of this unit met so far (JSON objects)."""
         self.reads = 0
+        self.lost: list[LostStretch] = []
+        """Damaged stretches skipped between this unit's reads (the replay resumed after each)."""
+        self._gaps_seen = 0
+        self._last_ns: int | None = None
         self._origin = clock_origin if clock_origin is not None else []
         self._on_progress = on_progress
         self._it = iter_capture(self.path, self.state)
@@ -91,8 +122,16 @@ class CaptureReplayLink:
                 continue
             if item.direction != "rx":
                 continue
+            self._note_gaps(item.host_ns)
+            self._last_ns = item.host_ns
             return item
+        self._note_gaps(None)
         return None
+
+    def _note_gaps(self, after_ns: int | None) -> None:
+        for gap in self.state.gaps[self._gaps_seen :]:
+            self.lost.append(LostStretch(gap, self._last_ns, after_ns))
+        self._gaps_seen = len(self.state.gaps)
 
     async def read(self) -> bytes:
         """The next captured read; ``b""`` at the end of the capture or the window."""
