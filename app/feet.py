@@ -17,7 +17,7 @@ from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from footnav.app import heap
@@ -44,6 +44,9 @@ from footnav.pipeline.runner import NavSink
 from footnav.pipeline.smoothing.stepwise import StepSmoothingNavigator
 from footnav.views.dual_imu import DualRunView
 from footnav.views.outputs import SessionViews
+
+if TYPE_CHECKING:
+    from footnav.views.lsl import LslFoot, LslOutlets
 
 FOOT_START_OFFSET_M: dict[str, tuple[float, float, float]] = {
     "left": (0.0, 0.1, 0.0),
@@ -302,9 +305,16 @@ def link_summary(run: FootRun) -> str:
 
 
 def foot_sinks(
-    run: FootRun, views: SessionViews | None, status: StatusLine, *, two_feet: bool, put_timeout_s: float = 0.0
+    run: FootRun,
+    views: SessionViews | None,
+    status: StatusLine,
+    *,
+    two_feet: bool,
+    put_timeout_s: float = 0.0,
+    lsl: LslOutlets | None = None,
 ) -> None:
-    """Wire a foot to the views (display-offset when two feet), the status line and link health."""
+    """Wire a foot to the views (display-offset when two feet), the status line, link health and,
+    with ``--lsl``, the LSL outlets (the foot's own origin, no display offset; Rerun or not)."""
     run.sinks = [status.foot(run.foot)]
     run.views = views
     if views is not None:
@@ -313,6 +323,39 @@ def foot_sinks(
             display = offset_sink(display, FOOT_START_OFFSET_M[run.foot])
         run.health = LinkHealth(views.log_link, run.foot, clock_rate_hz=lambda: run.result.clock_rate_hz)
         run.sinks = [display, run.health, *run.sinks]
+    if lsl is not None:
+        run.sinks.append(lsl.sink(run.foot))
+
+
+def open_lsl_outlets(
+    feet: Sequence[LslFoot] | None, *, wait_s: float = 0.0, max_buffered_s: int | None = None
+) -> LslOutlets | None:
+    """The session's LSL outlets (None without ``--lsl``), with a line on stderr naming the streams;
+    with ``wait_s`` > 0, once every stream has a consumer or ``wait_s`` has passed (``--lsl-wait``).
+    ``max_buffered_s``: what each outlet keeps for a lagging consumer (None: liblsl's default).
+
+    Raises
+    ------
+    FootnavError
+        pylsl is missing or liblsl failed (``footnav.views.lsl.open_lsl``).
+    """
+    if feet is None:
+        return None
+    from footnav.views.lsl import MAX_BUFFERED_S, open_lsl, source_id
+
+    lsl = open_lsl(feet, max_buffered_s=max_buffered_s or MAX_BUFFERED_S)
+    names = [f"'footnav {f.foot} navigation' ({source_id(f.identity, f.foot)})" for f in feet]
+    print(f"LSL: streaming {', '.join(names)} and 'footnav gait events'", file=sys.stderr)
+    if wait_s > 0:
+        lsl.wait_for_consumers(wait_s, notice=notice)
+    return lsl
+
+
+def close_lsl_outlets(lsl: LslOutlets | None) -> None:
+    """Close the LSL outlets (if any) and say what went out."""
+    if lsl is not None:
+        lsl.close()
+        print(lsl.summary(), file=sys.stderr)
 
 
 async def run_feet(runs: Sequence[FootRun], session: Callable[[FootRun], Awaitable[Any]]) -> None:

@@ -3,7 +3,9 @@
 A synthetic ten-minute track at 200 Hz (120 000 rows of ``footnav.app.commands.export.EXPORT_COLUMNS``: a random
 walk, unit quaternions, stance flags, growing variances) is written by the writer ``footnav export`` had
 (``csv.writer`` over ``f"{v:.9g}"`` of each value) and by today's (``footnav.device.files.table_csv``); the
-best of ``--repeats`` wall-clock times of each, their ratio, and whether the two files are the same bytes.
+best of ``--repeats`` wall-clock times of each, their ratio, and whether the two files are the same bytes; and the
+same table written as Parquet (``footnav.device.files.table_parquet``, as ``footnav export -o TRACK.parquet``
+writes it), its time as a ratio to today's CSV writer's, and its size.
 
 Then ``footnav export DIR -o OUTDIR`` of a folder of real recordings (``--folder``, default the PyShoe VICON trials
 of ``shared/data`` beside the checkout; skipped when absent) serially (``--jobs 1``) and with one process per core,
@@ -24,8 +26,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from footnav.app.commands.export import EXPORT_COLUMNS, run_export_batch
+from footnav.app.commands.export import COLUMN_UNITS, EXPORT_COLUMNS, run_export_batch
 from footnav.device.files.table_csv import write_table_csv
+from footnav.device.files.table_parquet import write_table_parquet
 from numpy.typing import NDArray
 
 STANCE = EXPORT_COLUMNS.index("stance")
@@ -58,6 +61,11 @@ def new_writer(path: Path, table: NDArray[np.float64]) -> None:
     write_table_csv(path, EXPORT_COLUMNS, table, frozenset({STANCE}))
 
 
+def parquet_writer(path: Path, table: NDArray[np.float64]) -> None:
+    """``footnav.app.commands.export.write_track_parquet``'s writing."""
+    write_table_parquet(path, EXPORT_COLUMNS, table, flag_columns=frozenset({STANCE}), units=COLUMN_UNITS)
+
+
 def best_of(repeats: int, run: object, *args: object) -> float:
     """The shortest wall-clock time of ``repeats`` calls of ``run(*args)``, s."""
     assert callable(run)
@@ -79,12 +87,18 @@ def writer_rows(rows: int, repeats: int) -> list[str]:
         new_s = best_of(repeats, new_writer, new_path, table)
         same = old_path.read_bytes() == new_path.read_bytes()
         size_mb = new_path.stat().st_size / 1e6
+        parquet_path = Path(tmp) / "track.parquet"
+        parquet_writer(parquet_path, table[:10])  # import pyarrow outside the timing
+        parquet_s = best_of(repeats, parquet_writer, parquet_path, table)
+        parquet_mb = parquet_path.stat().st_size / 1e6
     return [
         f"track CSV, {rows} rows ({size_mb:.1f} MB), best of {repeats}",
         f"  old writer (csv.writer, f-strings)   {old_s:7.3f} s",
         f"  new writer (compiled formatting)     {new_s:7.3f} s",
         f"  ratio old/new                        {old_s / new_s:7.1f} x   (target >= 10 x)",
         f"  same bytes                           {'yes' if same else 'NO'}",
+        f"  Parquet writer (pyarrow, zstd)       {parquet_s:7.3f} s   ({parquet_mb:.1f} MB)",
+        f"  ratio new CSV/Parquet                {new_s / parquet_s:7.1f} x",
     ]
 
 

@@ -1,8 +1,12 @@
-"""Rerun: entity paths, the default blueprint, archetype conversion and the logger thread."""
+"""Rerun: entity paths, the default blueprint, archetype conversion and the logger thread; the Lab
+Streaming Layer outlets (``--lsl``)."""
 
 from typing import TYPE_CHECKING
 
 from footnav.pipeline._lazy import lazy_exports
+from footnav.views.rerun_env import prepare_sdk_environment
+
+prepare_sdk_environment()  # before any footnav.views module imports rerun
 
 if TYPE_CHECKING:
     from .blueprint import build_blueprint as build_blueprint
@@ -10,6 +14,9 @@ if TYPE_CHECKING:
     from .dual_imu import save_dual_runs as save_dual_runs
     from .logger import LoggerStats as LoggerStats
     from .logger import RerunLogger as RerunLogger
+    from .lsl import LslOutlets as LslOutlets
+    from .lsl import LslRequest as LslRequest
+    from .lsl import open_lsl as open_lsl
     from .outputs import Output as Output
     from .outputs import SessionViews as SessionViews
     from .outputs import open_session_views as open_session_views

@@ -5,12 +5,18 @@ sinks: a gRPC sink whose viewer went away blocks every log call of its stream (r
 5), which would stop the file too. Separate streams with the same ``recording_id`` keep the file
 writing when a viewer dies; the dead viewer's logger is dropped with a one-line notice, and the
 session and its capture carry on. The outputs merge into one recording wherever they meet.
+
+A recording file that cannot be written (a full disk) is known within its flush period (the file's
+logger waits for each flush to be written), said in one line, cut back to its last whole message so
+Rerun's readers read it, and listed in :data:`INCOMPLETE_RECORDINGS` (the command's exit code is then
+:data:`EXIT_RECORDING_INCOMPLETE`). The web viewer's server stops with the session unless kept.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
+import shutil
 import subprocess
 import threading
 import time
@@ -26,6 +32,7 @@ from footnav.pipeline.nav_types import ClearanceSeries, NavBatch
 from footnav.views.dual_imu import DualRunView
 from footnav.views.logger import FILE_FLUSH_PERIOD_S, FLUSH_PERIOD_S, RerunLogger
 from footnav.views.paths import DEFAULT_FOOT
+from footnav.views.rerun_env import private_folder, remove_private_folder
 from footnav.views.sinks import (
     ViewerStartError,
     check_writable,
@@ -33,6 +40,8 @@ from footnav.views.sinks import (
     has_display,
     serve_web_viewer,
     spawn_viewer,
+    stop_process,
+    trim_rrd,
 )
 from numpy.typing import NDArray
 
@@ -40,6 +49,10 @@ log = logging.getLogger(__name__)
 
 LIVENESS_CHECK_S = 1.0
 DEAD_LOGGER_CLOSE_S = 0.5
+EXIT_RECORDING_INCOMPLETE = 3
+"""Exit code of a session that ran but whose .rrd file could not be written to the end."""
+INCOMPLETE_RECORDINGS: list[Path] = []
+"""The .rrd files of this process's sessions that stopped early (the command's exit code says so)."""
 
 
 @dataclass
@@ -58,6 +71,10 @@ class Output:
         the viewer or web server process footnav started, if any (watched for exit).
     path
         the .rrd file, for ``file`` outputs.
+    folder
+        the private folder of the process (:mod:`footnav.views.rerun_env`), removed once it ended.
+    keep
+        leave the process running when the session ends (a web viewer's server, when asked).
     """
 
     kind: str
@@ -66,6 +83,8 @@ class Output:
     process: subprocess.Popen[bytes] | None = None
     path: Path | None = None
     alive: bool = True
+    folder: Path | None = None
+    keep: bool = False
 
 
 class SessionViews:
@@ -101,6 +120,8 @@ class SessionViews:
             reason = None
             if out.process is not None and (code := out.process.poll()) is not None:
                 reason = f"the Rerun {out.kind} ({out.description}) exited (code {code})"
+            elif out.logger.stats.error is not None and out.path is not None:
+                reason = _file_failed(out.path, out.logger.stats.error)
             elif out.logger.stats.error is not None:
                 reason = f"the Rerun {out.kind} output ({out.description}) failed: {out.logger.stats.error}"
             if reason is None:
@@ -161,20 +182,49 @@ class SessionViews:
             out.logger.log_link(**health)
 
     def close(self) -> list[str]:
-        """Close every live output (file footers written); returns notes on what did not close cleanly."""
+        """Close every live output (file footers written), stop the web viewer's server unless it is
+        kept, remove the private folders of processes that ended; returns notes on what did not close
+        cleanly or was kept running."""
         self.check_outputs()
         notes = []
         for out in self.outputs:
-            if not out.alive:
-                continue
-            if not out.logger.close():
+            if out.alive and not out.logger.close():
                 notes.append(f"the Rerun {out.kind} ({out.description}) did not finish in time")
-            elif out.logger.stats.error is not None:
+            elif out.alive and out.logger.stats.error is not None and out.path is not None:
+                notes.append(_file_failed(out.path, out.logger.stats.error))
+            elif out.alive and out.logger.stats.error is not None:
                 notes.append(f"the Rerun {out.kind} ({out.description}) failed: {out.logger.stats.error}")
+            if out.process is not None and out.kind == "web viewer" and out.keep:
+                notes.append(
+                    f"the web viewer keeps running (pid {out.process.pid}, {out.description}); "
+                    f"any user of this machine can open it; stop it with `kill {out.process.pid}`"
+                )
+            elif out.process is not None and out.kind == "web viewer":
+                stop_process(out.process)
+            if out.folder is not None and (out.process is None or out.process.poll() is not None):
+                remove_private_folder(out.folder)
         return notes
 
     def samples_dropped(self) -> int:
         return max(o.logger.stats.samples_dropped for o in self.outputs)
+
+
+def _file_failed(path: Path, error: BaseException) -> str:
+    """One line on a recording file that could not be written: why, and what it keeps (the file is
+    cut back to its last whole message, :func:`~footnav.views.sinks.trim_rrd`)."""
+    if path not in INCOMPLETE_RECORDINGS:
+        INCOMPLETE_RECORDINGS.append(path)
+    kept = trim_rrd(path)
+    try:
+        full = shutil.disk_usage(path.parent).free < FULL_DISK_BYTES
+    except OSError:
+        full = False
+    why = "no space left on its disk" if full else f"Rerun's file writer stopped ({error})"
+    return f"the recording file {path} stopped: {why}; it keeps the first {kept / 1e6:.1f} MB, readable"
+
+
+FULL_DISK_BYTES = 1 << 20
+"""Less free space than this on a recording file's disk when its writing failed: the disk is full."""
 
 
 def check_save_destination(path: Path) -> None:
@@ -220,6 +270,7 @@ def open_session_views(
     rrd_footer: bool = True,
     tof: bool = False,
     truth: bool = False,
+    keep_web: bool = False,
 ) -> tuple[SessionViews | None, list[str]]:
     """Start a session's outputs and describe them.
 
@@ -230,7 +281,8 @@ def open_session_views(
     two feet at 1 kHz); the file reads like one whose writer was stopped (``RrdReader.stream()``, the
     viewer), and ``rerun rrd optimize`` adds the index.
 
-    - ``web``: host the web viewer on 127.0.0.1 and stream to it (its URL is in the notes);
+    - ``web``: host the web viewer on 127.0.0.1 and stream to it (its URL is in the notes); its server
+      stops with the session (:meth:`SessionViews.close`) unless ``keep_web``;
     - else, a viewer wanted and a display present: spawn the native viewer (127.0.0.1);
     - a viewer wanted but none could start (no display, start-up failure): save to a default file
       (reported and skipped if it cannot be written);
@@ -264,21 +316,26 @@ def open_session_views(
             flush_period_s=flush,
             tof=tof,
             truth=truth,
+            verify_writes=isinstance(sink, rr.FileSink),
         )
 
     fallback = False
     if web:
+        folder = private_folder()
         try:
-            grpc_url, page, proc = serve_web_viewer()
+            grpc_url, page, proc = serve_web_viewer(folder=folder)
         except ViewerStartError as exc:
+            remove_private_folder(folder)
             notes.append(f"web viewer not started: {exc}")
             fallback = True
         else:
-            outputs.append(Output("web viewer", page, logger(rr.GrpcSink(grpc_url)), proc))
-            notes.append(f"web viewer (127.0.0.1 only, pid {proc.pid}): open {page}")
+            web_out = Output("web viewer", page, logger(rr.GrpcSink(grpc_url)), proc, folder=folder, keep=keep_web)
+            outputs.append(web_out)
+            until = "kept after the session" if keep_web else "until the session ends"
+            notes.append(f"web viewer (127.0.0.1 only, pid {proc.pid}, {until}): open {page}")
     elif want_viewer:
         if has_display(environ):
-            try:
+            try:  # the viewer outlives the session: its private folder stays with it
                 url, proc = spawn_viewer(env=environ)
             except ViewerStartError as exc:
                 notes.append(f"viewer not started: {exc}")

@@ -82,6 +82,10 @@ class StrideTable:
         )
         return True
 
+    def strides(self, foot: str) -> list[Stride]:
+        """The strides of ``foot`` so far, in time order (the list itself: do not change it)."""
+        return self._feet[foot].strides
+
     def markdown(self) -> str:
         """The table of every foot: its last strides and the means of all of them."""
         parts = []

@@ -21,7 +21,13 @@ from types import ModuleType
 from typing import TYPE_CHECKING, Literal, overload
 
 import numpy as np
-from footnav.app.commands.export import EXPORT_COLUMNS, _is_capture, load_other_recording, navigate_recording
+from footnav.app.commands.export import (
+    EXPORT_COLUMNS,
+    _is_capture,
+    load_other_recording,
+    navigate_recording,
+    write_track_parquet,
+)
 from footnav.device.files.recordings import Recording, _nominal_rate
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.gait import parameters
@@ -116,6 +122,20 @@ class Navigation:
         frame = pd.DataFrame(values, columns=list(EXPORT_COLUMNS))
         frame["stance"] = self.stance
         return frame
+
+    def to_parquet(self, path: str | os.PathLike[str]) -> None:
+        """Write the estimates to a Parquet file, the columns and values of ``footnav export -o TRACK.parquet``
+        (``footnav.app.commands.export.write_track_parquet``: ``to_pandas``'s, with every bit of each value and
+        each column's unit in the schema).
+
+        Raises
+        ------
+        ImportError
+            pyarrow is not installed (``pip install 'footnav[parquet]'``).
+        FootnavError
+            the file cannot be written.
+        """
+        write_track_parquet(self.nav, Path(path))
 
 
 @overload

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import math
 import sys
 from collections.abc import Callable
@@ -31,6 +32,7 @@ from footnav.app.feet import (
     FootRun,
     attach_unit,
     calibration_lookup,
+    close_lsl_outlets,
     dual_view_sink,
     finish_capture,
     foot_run,
@@ -39,6 +41,7 @@ from footnav.app.feet import (
     new_session_id,
     notice,
     open_capture,
+    open_lsl_outlets,
     rate_reporter,
     run_feet,
     unit_header,
@@ -63,6 +66,7 @@ from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.navigation.navigator import Navigator
 from footnav.pipeline.navigation.profiles import get_profile
 from footnav.pipeline.runner import NavSink
+from footnav.views.lsl import LslRequest, lsl_feet
 from footnav.views.outputs import open_session_views
 from numpy.typing import NDArray
 
@@ -119,6 +123,9 @@ class DemoOptions:
     (:mod:`footnav.app.commands.demo_unit`); one foot."""
     mode: str = "auto"
     """With ``unit``: the output ``live --mode`` asks for."""
+    lsl: LslRequest | None = None
+    """``--lsl``: the estimates on Lab Streaming Layer too (:mod:`footnav.views.lsl`), as from a unit
+    named ``emulator``."""
 
 
 @dataclass(frozen=True)
@@ -335,6 +342,13 @@ def _shoe_demo(opts: DemoOptions) -> int:
     )
     cfg = demo_config(opts)
     session_id = new_session_id("demo")
+    lsl_streams = lsl_feet(
+        opts.lsl,
+        dict.fromkeys(feet, "emulator"),
+        units=f"footnav emulator ({opts.grade})",
+        rates=dict.fromkeys(feet, truth.rate_hz),
+    )
+    lsl = open_lsl_outlets(lsl_streams, wait_s=opts.lsl.wait_s if opts.lsl else 0.0)
     heap.limit_arenas()  # before the viewer's and the capture's threads start
     views, notes = open_session_views(
         save=opts.save,
@@ -370,7 +384,7 @@ def _shoe_demo(opts: DemoOptions) -> int:
     # (as a replay does) rather than dropping samples from the recording.
     put_timeout_s = 0.0 if opts.realtime == 1.0 else DEMO_PUT_TIMEOUT_S
     for run in runs:
-        foot_sinks(run, views, status, two_feet=two, put_timeout_s=put_timeout_s)
+        foot_sinks(run, views, status, two_feet=two, put_timeout_s=put_timeout_s, lsl=lsl)
         if opts.collect is not None:
             run.sinks.append(opts.collect(run.foot))
         if views is not None and isinstance(run.navigator, DualNavigator):
@@ -423,6 +437,7 @@ def _shoe_demo(opts: DemoOptions) -> int:
         if views is not None:
             for note in views.close():
                 notice(note)
+        close_lsl_outlets(lsl)
     if interrupted:
         print("interrupted: stopped the unit and closed the recording", file=sys.stderr)
     code = print_summaries(opts, runs, truths, lever, interrupted=interrupted)
@@ -495,9 +510,17 @@ def _unit_demo(opts: DemoOptions) -> int:
 
     cfg = demo_config(opts)
 
+    lsl = None if opts.lsl is None else dataclasses.replace(opts.lsl, identity=opts.lsl.identity or "emulator")
+
     def live(port: str) -> LiveOptions:
         return LiveOptions(
-            ports={"foot": port}, config=cfg, save=opts.save, viewer=opts.viewer, web=opts.web, capture=opts.capture
+            ports={"foot": port},
+            config=cfg,
+            save=opts.save,
+            viewer=opts.viewer,
+            web=opts.web,
+            capture=opts.capture,
+            lsl=lsl,
         )
 
     return run_unit_demo(

@@ -1,9 +1,10 @@
-"""``footnav export``: a recording -> one CSV row per sample of the navigation solution.
+"""``footnav export``: a recording -> one CSV (or Parquet) row per sample of the navigation solution.
 
 A recording from another tool is loaded (``footnav.device.files.recordings``) and navigated here; a footnav capture
 (``.mcap``) is replayed headless through the same device decoding and pipeline as ``footnav replay``
 (so its rows are the live estimates, bit for bit), one file per foot, and a ToF unit's rows carry its
-clearance too (:data:`CLEARANCE_COLUMNS`).
+clearance too (:data:`CLEARANCE_COLUMNS`). The track is CSV, or Parquet (``footnav.device.files.table_parquet``)
+for an output named ``.parquet`` or ``--output-format parquet``: the same columns and values, every bit kept.
 """
 
 from __future__ import annotations
@@ -12,12 +13,14 @@ import csv
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from footnav.app.status import input_handling
 from footnav.device.files.capture import MCAP_MAGIC
 from footnav.device.files.recordings import CsvMapping, Recording, load_recording
 from footnav.device.files.table_csv import write_table_csv
+from footnav.device.files.table_parquet import write_table_parquet
 from footnav.pipeline.aiding.tof_types import TofConfig
 from footnav.pipeline.errors import FootnavError, InputFormatError
 from footnav.pipeline.gait.steps import segment_steps
@@ -27,6 +30,11 @@ from footnav.pipeline.navigation.lead_in import RecordingRun, navigate_every_sam
 from footnav.pipeline.navigation.navigator import NavConfig, NavStats, navigate
 from footnav.pipeline.navigation.profiles import get_profile
 from footnav.pipeline.navigation.saturation import reconstruct_saturated_rates
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from distributed import Client
+    from footnav.app.commands.batch import FileResult
 
 EXPORT_COLUMNS = (
     "t",
@@ -113,9 +121,22 @@ hits past and future (``footnav.pipeline.gait.tof_clearance``), and the height o
 unit's first range reading, where the clearance is the height above the start floor)."""
 
 
-def write_track_csv(nav: NavBatch, path: Path) -> None:
-    """Write ``EXPORT_COLUMNS`` (and, for a ToF unit, ``CLEARANCE_COLUMNS``): SI units, navigation frame
-    right-handed z up, origin at the start."""
+TRACK_FORMATS = {"csv": ".csv", "parquet": ".parquet"}
+"""The track's file formats (``--output-format``) and their suffixes."""
+
+COLUMN_UNITS = {
+    "t": "s",
+    **dict.fromkeys(("x", "y", "z", *CLEARANCE_COLUMNS), "m"),
+    **dict.fromkeys(("vx", "vy", "vz"), "m/s"),
+    **dict.fromkeys(("qw", "qx", "qy", "qz", "stance"), "1"),
+    **dict.fromkeys(("var_x", "var_y", "var_z"), "m^2"),
+}
+"""The unit of each track column (kept in a Parquet file's schema)."""
+
+
+def track_table(nav: NavBatch) -> tuple[tuple[str, ...], NDArray[np.float64]]:
+    """The track's column names (``EXPORT_COLUMNS``, and for a ToF unit ``CLEARANCE_COLUMNS``) and its (n, columns)
+    values: SI units, navigation frame right-handed z up, origin at the start."""
     var = np.diagonal(nav.pos_cov_n_m2, axis1=1, axis2=2)
     columns = [nav.t_s, nav.pos_n_m, nav.vel_n_mps, nav.quat_nb_wxyz, nav.stance.astype(np.float64), var]
     names: tuple[str, ...] = EXPORT_COLUMNS
@@ -123,8 +144,62 @@ def write_track_csv(nav: NavBatch, path: Path) -> None:
         swing = swing_clearance(nav.t_s, nav.pos_n_m, nav.stance, nav.clearance_m, nav.ranges, TofConfig().snap_m)
         columns += [nav.clearance_m, swing, nav.floor_z_m]
         names = EXPORT_COLUMNS + CLEARANCE_COLUMNS
+    return names, np.column_stack(columns)
+
+
+def write_track_csv(nav: NavBatch, path: Path) -> None:
+    """Write :func:`track_table` as CSV."""
+    names, table = track_table(nav)
     # the bytes csv.writer wrote for f"{v:.9g}" of each value (int for the stance), formatted compiled
-    write_table_csv(path, names, np.column_stack(columns), frozenset({EXPORT_COLUMNS.index("stance")}))
+    write_table_csv(path, names, table, frozenset({EXPORT_COLUMNS.index("stance")}))
+
+
+def write_track_parquet(nav: NavBatch, path: Path) -> None:
+    """Write :func:`track_table` as Parquet: float64 columns, the stance boolean, each column's unit
+    (:data:`COLUMN_UNITS`) in the schema.
+
+    Raises
+    ------
+    ImportError
+        pyarrow is not installed (``pip install 'footnav[parquet]'``).
+    """
+    names, table = track_table(nav)
+    frame = "navigation frame: right-handed, z up, origin at the start position; SI units"
+    write_table_parquet(
+        path,
+        names,
+        table,
+        flag_columns=frozenset({EXPORT_COLUMNS.index("stance")}),
+        units=COLUMN_UNITS,
+        metadata={"footnav.track": frame},
+    )
+
+
+def track_format(path: Path, out_format: str | None = None) -> str:
+    """The format a track written to ``path`` takes: ``out_format``, or else ``parquet`` for a ``.parquet`` name and
+    ``csv`` for any other.
+
+    Raises
+    ------
+    FootnavError
+        ``path``'s suffix names the other format.
+    """
+    by_name = "parquet" if path.suffix.lower() == ".parquet" else "csv"
+    if out_format is None:
+        return by_name
+    if out_format not in TRACK_FORMATS:
+        raise ValueError(f"out_format must be one of {tuple(TRACK_FORMATS)} or None, got {out_format!r}")
+    if path.suffix.lower() in TRACK_FORMATS.values() and by_name != out_format:
+        raise FootnavError(f"{path} is named {path.suffix} but --output-format is {out_format}; name it alike")
+    return out_format
+
+
+def write_track(nav: NavBatch, path: Path, out_format: str | None = None) -> None:
+    """Write the track as :func:`track_format` says: :func:`write_track_csv` or :func:`write_track_parquet`."""
+    if track_format(path, out_format) == "parquet":
+        write_track_parquet(nav, path)
+    else:
+        write_track_csv(nav, path)
 
 
 def _write_csv(path: Path, header: tuple[str, ...], rows: Iterable[list[int | str]]) -> None:
@@ -217,10 +292,12 @@ def run_export(
     stance_levels: bool = True,
     steps_out: Path | None = None,
     gait_out: Path | None = None,
+    out_format: str | None = None,
 ) -> str:
-    """Load, navigate and write the track (and, with ``steps_out``, its steps; with ``gait_out``, its
-    strides' gait parameters, ``footnav.app.api.gait_export``); returns a one-line summary (and the gait's
-    summary line)."""
+    """Load, navigate and write the track (as :func:`write_track`, in ``out_format`` or as ``out``'s suffix says;
+    and, with ``steps_out``, its steps; with ``gait_out``, its strides' gait parameters,
+    ``footnav.app.api.gait_export``); returns a one-line summary (and the gait's summary line)."""
+    track_format(out, out_format)  # a name that contradicts the format is refused before any work
     if _is_capture(source):
         options = (("--format", fmt), ("--columns", columns), ("--profile", profile))
         given = [name for name, v in options if v] + ([] if stance_levels else ["--no-stance-levels"])
@@ -229,10 +306,10 @@ def run_export(
                 f"{source} is a footnav capture, exported with the settings it was recorded with; "
                 f"drop {', '.join(given)}"
             )
-        return export_capture(source, out, steps_out, smooth=smooth, gait_out=gait_out)
+        return export_capture(source, out, steps_out, smooth=smooth, gait_out=gait_out, out_format=out_format)
     rec = load_other_recording(source, fmt, columns)
     nav, stats = navigate_recording(rec, profile, smooth, stance_levels)
-    write_track_csv(nav, out)
+    write_track(nav, out, out_format)
     # a step's covariance is the growth of the causal filter's between its epochs; the lead-in's shrinks towards
     # the still period it was navigated back from, so a track with one has no step covariance, as a smoothed one
     with_covariance = smooth is None and not stats.samples_navigated_backwards
@@ -261,6 +338,7 @@ class ExportJob:
     profile: str | None = None
     smooth: str | None = None
     stance_levels: bool = True
+    out_format: str | None = None
 
     def __call__(self, source: Path) -> str:
         out = self.destinations[source]
@@ -276,15 +354,21 @@ class ExportJob:
             profile=self.profile,
             smooth=self.smooth,
             stance_levels=self.stance_levels,
+            out_format=self.out_format,
         )
 
 
-def run_export_batch(
-    paths: list[Path], out_dir: Path, jobs: int | None = None, **options: str | bool | None
-) -> tuple[list[str], list[str]]:
-    """Export every recording (and capture) found in ``paths`` to ``out_dir`` (``<stem>.csv``, below the
-    subfolders it had) on ``jobs`` processes; ``options`` as :class:`ExportJob`'s. Returns each file's summary line
-    and each failure's, in the order of the files.
+def export_files(
+    paths: list[Path],
+    out_dir: Path,
+    jobs: int | None = None,
+    client: Client | None = None,
+    **options: str | bool | None,
+) -> list[FileResult[str]]:
+    """Export every recording (and capture) found in ``paths`` to ``out_dir`` (``<stem>.csv``, or ``.parquet`` with
+    ``out_format="parquet"``, below the subfolders it had) on ``jobs`` processes or ``client``'s Dask cluster
+    (``footnav.app.commands.batch.run_files``); ``options`` as :class:`ExportJob`'s. Returns each file's result (its
+    summary line, or its failure), in the order of the files.
 
     Raises
     ------
@@ -298,8 +382,21 @@ def run_export_batch(
         raise FootnavError("no recordings found in " + ", ".join(str(p) for p in paths))
     if out_dir.exists() and not out_dir.is_dir():
         raise FootnavError(f"{out_dir} is a file; with a folder or several recordings, -o names a folder")
-    job = ExportJob(dict(zip(files, export_destinations(paths, files, out_dir), strict=True)), **options)  # type: ignore[arg-type]
-    results = run_files(job, files, jobs, "export")
+    suffix = TRACK_FORMATS[str(options.get("out_format") or "csv")]
+    dests = export_destinations(paths, files, out_dir, suffix)
+    job = ExportJob(dict(zip(files, dests, strict=True)), **options)  # type: ignore[arg-type]
+    return run_files(job, files, jobs, "export", client=client)
+
+
+def run_export_batch(
+    paths: list[Path],
+    out_dir: Path,
+    jobs: int | None = None,
+    client: Client | None = None,
+    **options: str | bool | None,
+) -> tuple[list[str], list[str]]:
+    """:func:`export_files`, as each file's summary line and each failure's, in the order of the files."""
+    results = export_files(paths, out_dir, jobs, client, **options)
     return [r.value for r in results if r.value is not None], [r.error for r in results if r.error]
 
 
@@ -330,7 +427,13 @@ def _is_capture(path: Path) -> bool:
 
 
 def export_capture(
-    source: Path, out: Path, steps_out: Path | None = None, *, smooth: str | None = None, gait_out: Path | None = None
+    source: Path,
+    out: Path,
+    steps_out: Path | None = None,
+    *,
+    smooth: str | None = None,
+    gait_out: Path | None = None,
+    out_format: str | None = None,
 ) -> str:
     """Replay a footnav capture headless and write each foot's rows (``out`` for one foot, else
     ``<stem>-<foot><suffix>`` beside it) and, with ``steps_out``, its steps (named alike); returns a
@@ -355,7 +458,7 @@ def export_capture(
     written, gait = [], []
     for foot, nav in navs.items():
         path = out if len(navs) == 1 else out.with_name(f"{out.stem}-{foot}{out.suffix}")
-        write_track_csv(nav, path)
+        write_track(nav, path, out_format)
         written.append(f"{len(nav)} rows to {path}{' with clearance' if nav.floor_z_m is not None else ''}")
         if steps_out is not None:
             spath = steps_out if len(navs) == 1 else steps_out.with_name(f"{steps_out.stem}-{foot}{steps_out.suffix}")

@@ -29,6 +29,7 @@ from footnav.app.feet import (
     FootRun,
     attach_unit,
     calibration_lookup,
+    close_lsl_outlets,
     dual_view_sink,
     finish_capture,
     foot_run,
@@ -38,6 +39,7 @@ from footnav.app.feet import (
     new_session_id,
     notice,
     open_capture,
+    open_lsl_outlets,
     rate_reporter,
     run_feet,
     unit_header,
@@ -51,6 +53,7 @@ from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
 from footnav.pipeline.dual_imu.navigator import DualNavigator
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.runner import NavSink
+from footnav.views.lsl import LslRequest, lsl_feet
 from footnav.views.outputs import SessionViews, open_session_views
 
 if TYPE_CHECKING:
@@ -112,6 +115,8 @@ class LiveOptions:
         (``footnav.app.stream.fused_imus``) instead of the unit's calibrated output 0x40.
     stance
         stance detector mode with ToF units (``footnav.pipeline.stance.height_detector.HeightDetectorParams``).
+    lsl
+        ``--lsl``: stream the estimates on Lab Streaming Layer too (:mod:`footnav.views.lsl`).
     """
 
     ports: dict[str, str]
@@ -129,6 +134,7 @@ class LiveOptions:
     fused_imu_mask: int | None = None
     output: str = "auto"
     model: str | None = None
+    lsl: LslRequest | None = None
 
 
 def choose_output(opts: LiveOptions, model: UnitModel) -> str:
@@ -207,6 +213,12 @@ async def live_session(opts: LiveOptions) -> int:
         raise FootnavError(
             f"rate divider must be 0..{top} for {what}, got {rate_divider} ({cfg.source('unit.rate_divider')})"
         )
+    texts = list(opts.ports.values())
+    if len(set(texts)) < len(texts):
+        same = next(t for t in texts if texts.count(t) > 1)
+        raise FootnavError(
+            f"one unit ({same or 'ble:'}) is given for two feet; each foot needs its own unit (--left and --right)"
+        )
     addresses = {foot: UnitAddress.parse(text) for foot, text in opts.ports.items()}
     dividers = {foot: rate_divider_for(address, cfg, output) for foot, address in addresses.items()}
     feet = tuple(opts.ports)
@@ -216,6 +228,13 @@ async def live_session(opts: LiveOptions) -> int:
     if output == "raw" and dual is None and fused is None:
         fused = (1 << model.imus) - 1  # every IMU of the board, averaged
     onboard = output if output in ONBOARD_TITLES else None
+    lsl_streams = lsl_feet(
+        opts.lsl,
+        {foot: str(address) for foot, address in addresses.items()},
+        units=model.title,
+        rates={foot: 0.0 if onboard == "steps" else model.rate_hz(k) for foot, k in dividers.items()},
+    )
+    lsl = await asyncio.to_thread(open_lsl_outlets, lsl_streams, wait_s=opts.lsl.wait_s if opts.lsl else 0.0)
     heap.limit_arenas()  # before the viewer's and the capture's threads start
     views, notes = open_session_views(
         save=opts.save,
@@ -249,7 +268,7 @@ async def live_session(opts: LiveOptions) -> int:
         for foot in feet
     ]
     for run in runs:
-        foot_sinks(run, views, status, two_feet=two_feet)
+        foot_sinks(run, views, status, two_feet=two_feet, lsl=lsl)
         if views is not None and isinstance(run.navigator, DualNavigator):
             run.sinks.append(dual_view_sink(run.navigator, views, run.foot))
         if opts.collect is not None:
@@ -306,6 +325,7 @@ async def live_session(opts: LiveOptions) -> int:
         if views is not None:
             for note in views.close():
                 notice(note)
+        close_lsl_outlets(lsl)
         for run in runs:
             if run.result.samples_received:
                 print((f"{run.foot}: " if two_feet else "") + link_summary(run))

@@ -21,12 +21,13 @@ from pathlib import Path
 
 import numpy as np
 from footnav.app.commands.export import lead_in_note, load_other_recording, navigate_recording
-from footnav.app.feet import notice
+from footnav.app.feet import close_lsl_outlets, notice, open_lsl_outlets
 from footnav.app.status import input_handling
 from footnav.device.files.recordings import Recording
 from footnav.pipeline.gait.events import GaitEventTracker
 from footnav.pipeline.metrics import ate, path_length_m
 from footnav.pipeline.nav_types import NavBatch, SmoothedSpan
+from footnav.views.lsl import LslRequest, lsl_feet
 from footnav.views.outputs import SessionViews, open_session_views
 from numpy.typing import NDArray
 
@@ -47,6 +48,9 @@ class RecordingReplayOptions:
         the unit profile (None: the format's sensor).
     smooth
         None (causal), ``whole`` or ``step`` (``footnav.app.commands.export.SMOOTHING``).
+    lsl
+        ``--lsl``: the estimates on Lab Streaming Layer too (:mod:`footnav.views.lsl`), all at once
+        once navigated, as from a unit ``replay:<recording name>``.
     """
 
     path: Path
@@ -58,6 +62,7 @@ class RecordingReplayOptions:
     save: Path | None = None
     viewer: bool = True
     web: bool = False
+    lsl: LslRequest | None = None
 
 
 def truth_on_estimate(est_pos_m: NDArray[np.float64], gt_pos_m: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -94,7 +99,14 @@ def run_recording_replay(opts: RecordingReplayOptions) -> int:
         file=sys.stderr,
     )
     nav, stats = navigate_recording(rec, opts.profile, opts.smooth, opts.stance_levels)
-    shown = nav if opts.smooth is None else beside_causal(rec, nav, opts)
+    shown = GaitEventTracker().annotate(nav if opts.smooth is None else beside_causal(rec, nav, opts))
+    lsl = open_lsl_outlets(
+        lsl_feet(
+            opts.lsl, {"foot": f"replay:{rec.name}"}, units=f"{rec.format} recording", rates={"foot": rec.rate_hz}
+        ),
+        wait_s=opts.lsl.wait_s if opts.lsl else 0.0,
+        max_buffered_s=math.ceil(len(nav) / rec.rate_hz) + 60,  # all of it is pushed at once
+    )
     views, notes = open_session_views(
         save=opts.save,
         want_viewer=opts.viewer,
@@ -109,6 +121,9 @@ def run_recording_replay(opts: RecordingReplayOptions) -> int:
         _show(views, rec, shown, stats.samples_before_alignment - stats.samples_navigated_backwards)
         for note in views.close():
             notice(note)
+    if lsl is not None:
+        lsl.put(shown, foot="foot")
+        close_lsl_outlets(lsl)
     handled = f"; {h}" if (h := input_handling(stats)) else ""
     print(
         f"samples navigated: {len(nav)} of {len(rec)}"
@@ -136,11 +151,11 @@ def beside_causal(rec: Recording, smoothed: NavBatch, opts: RecordingReplayOptio
 
 
 def _show(views: SessionViews, rec: Recording, nav: NavBatch, skipped: int) -> None:
-    """The track, the aligned truth (if any) and the recording's notes on every view."""
+    """The track (its gait events filled), the aligned truth (if any) and the recording's notes on every view."""
     if rec.gt_pos_m is not None:
         gt = rec.gt_pos_m[skipped:] - rec.gt_pos_m[skipped]
         views.log_truth(truth_on_estimate(nav.pos_n_m, gt), t_s=nav.t_s)
     views.log_event(f"{rec.format} recording {rec.name}: {len(rec)} samples at {rec.rate_hz:.0f} Hz", t_s=0.0)
     for note in rec.notes:
         views.log_event(note, t_s=0.0)
-    views.put(GaitEventTracker().annotate(nav), timeout_s=PUT_TIMEOUT_S)
+    views.put(nav, timeout_s=PUT_TIMEOUT_S)
