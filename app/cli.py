@@ -14,13 +14,26 @@ from footnav.pipeline.errors import FootnavError
 
 if TYPE_CHECKING:
     from footnav.app.config import Config
+    from footnav.views.lsl import LslRequest
 
 
 def _lever(values: list[float] | None) -> tuple[float, float, float] | None:
     return None if values is None else (values[0], values[1], values[2])
 
 
+def _lsl(args: argparse.Namespace) -> LslRequest | None:
+    """``--lsl`` (and ``--lsl-wait``) as the commands take it; None without ``--lsl``."""
+    if not args.lsl:
+        if args.lsl_wait > 0:
+            raise FootnavError("--lsl-wait applies to --lsl (how long to wait for a consumer)")
+        return None
+    from footnav.views.lsl import LslRequest
+
+    return LslRequest(wait_s=args.lsl_wait)
+
+
 def _export(args: argparse.Namespace) -> int:
+    from footnav.app.commands.batch import scheduler_client
     from footnav.app.commands.export import run_export, run_export_batch
 
     options = {
@@ -29,6 +42,7 @@ def _export(args: argparse.Namespace) -> int:
         "profile": args.profile,
         "smooth": args.smooth,
         "stance_levels": args.stance_levels,
+        "out_format": args.output_format,
     }
     if len(args.input) == 1 and not args.input[0].is_dir():
         print(run_export(args.input[0], args.output, steps_out=args.steps, gait_out=args.gait, **options))
@@ -36,7 +50,8 @@ def _export(args: argparse.Namespace) -> int:
     given = [name for name, v in (("--steps", args.steps), ("--gait", args.gait)) if v]
     if given:
         raise FootnavError(f"{' and '.join(given)}: for one recording; drop it to export a folder or several")
-    lines, failures = run_export_batch(args.input, args.output, args.jobs, **options)
+    with scheduler_client(args.scheduler) as client:
+        lines, failures = run_export_batch(args.input, args.output, args.jobs, client, **options)
     return _report_batch(lines, failures, "exported")
 
 
@@ -52,9 +67,15 @@ def _report_batch(lines: list[str], failures: list[str], done: str) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
+    from footnav.app.commands.batch import scheduler_client
     from footnav.app.commands.evaluate import format_table, run_evaluate
 
-    rows, problems = run_evaluate(args.paths, smooth=args.smooth, stance_levels=args.stance_levels, jobs=args.jobs)
+    if args.left or args.right or args.independent_feet or args.couple_heading:
+        return _evaluate_feet(args)
+    if not args.paths:
+        raise FootnavError("evaluate needs recordings (PATH ...), or a pair of them: --left FILE --right FILE")
+    with scheduler_client(args.scheduler) as client:
+        rows, problems = run_evaluate(args.paths, args.smooth, args.stance_levels, args.jobs, client)
     if rows:
         print(format_table(rows))
     for problem in problems:
@@ -63,6 +84,27 @@ def _evaluate(args: argparse.Namespace) -> int:
         files = "the recording" if len(problems) == 1 else f"none of the {len(problems)} recordings"
         raise FootnavError(f"nothing evaluated: {files} could be measured (the lines above say why)")
     return 2 if problems else 0
+
+
+def _evaluate_feet(args: argparse.Namespace) -> int:
+    from footnav.app.commands.evaluate import evaluate_pair, format_table, pair_summary
+
+    if not (args.left and args.right) or args.paths:
+        raise FootnavError("two feet are evaluated as --left FILE --right FILE, without other recordings")
+    if args.smooth:
+        raise FootnavError("--smooth applies to one foot's recording; two feet are evaluated with the causal filter")
+    if args.couple_heading and args.independent_feet:
+        raise FootnavError("--couple-heading couples the feet; --independent-feet does not: give one of them")
+    rows = evaluate_pair(
+        args.left,
+        args.right,
+        independent_only=args.independent_feet,
+        heading=args.couple_heading,
+        stance_levels=args.stance_levels,
+    )
+    print(format_table(rows))
+    print(pair_summary(rows))
+    return 0
 
 
 def _config(args: argparse.Namespace) -> Config:
@@ -120,6 +162,7 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
             fused_imu_mask=(args.imu_mask or 0x0F) if args.mode == "raw" and not args.dual_imu else None,
             output=args.mode,
             model=args.unit,
+            lsl=_lsl(args),
         )
     )
 
@@ -207,6 +250,7 @@ def _replay_capture(args: argparse.Namespace) -> int:
             config_is_explicit=args.config is not None or args.profile is not None,
             tof=not args.without_tof,
             stance=args.stance,
+            lsl=_lsl(args),
         )
     )
 
@@ -237,6 +281,7 @@ def _replay_recording(args: argparse.Namespace) -> int:
             save=args.save,
             viewer=not args.no_viewer,
             web=args.web,
+            lsl=_lsl(args),
         )
     )
 
@@ -277,6 +322,7 @@ def _demo(args: argparse.Namespace) -> int:
             stance=args.stance,
             unit=args.unit,
             mode=args.mode,
+            lsl=_lsl(args),
         )
     )
 
@@ -285,6 +331,15 @@ def _experiment(args: argparse.Namespace) -> int:
     from footnav.app.experiments import experiment_parser, run_experiment
 
     return run_experiment(experiment_parser(args.experiment_argv).parse_args(args.experiment_argv))
+
+
+def _recordings_whole(code: int) -> int:
+    """``code``, or 3 when the command's session ran but a .rrd file it wrote stopped early (a full
+    disk; ``footnav.views.outputs.INCOMPLETE_RECORDINGS``, said when it happened)."""
+    outputs = sys.modules.get("footnav.views.outputs")  # loaded only if a session had Rerun outputs
+    if code == 0 and outputs is not None and outputs.INCOMPLETE_RECORDINGS:
+        return int(outputs.EXIT_RECORDING_INCOMPLETE)
+    return code
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -315,7 +370,7 @@ def main(argv: list[str] | None = None) -> int:
             from footnav.views.outputs import check_save_destination
 
             check_save_destination(args.save)
-        return commands[args.command](args)
+        return _recordings_whole(commands[args.command](args))
     except FootnavError as exc:
         print(f"footnav: error: {exc}", file=sys.stderr)
         return 2

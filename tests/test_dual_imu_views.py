@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from footnav.app.cli import main
-from footnav.app.experiments.dual_imu import METHODS, evaluate_run, view_of
+from footnav.app.experiments.dual_imu import BOARD_METHODS, METHODS, evaluate_run, view_of
 from footnav.views.dual_imu import AXES, save_dual_runs
 from footnav.views.paths import TIMELINE, DualPaths
 from rerun.chunk import RrdReader
@@ -27,7 +27,7 @@ def test_saved_run_holds_every_track_and_residual(tmp_path: Path) -> None:
     assert out.stat().st_size > 10_000
     paths = DualPaths("stairs")
     n = len(view.t_s)
-    for method in METHODS:
+    for method in BOARD_METHODS:
         finite = np.all(np.isfinite(view.tracks_n_m[method][::10]), axis=1)
         assert _rows(out, paths.track(method)) == int(finite.sum())
     assert _rows(out, paths.imu("imu1")) == _rows(out, paths.imu("imu2")) == len(range(0, n, 10))
@@ -50,6 +50,6 @@ def test_experiment_command_prints_one_table_and_saves(tmp_path: Path, capsys: p
     text = capsys.readouterr().out
     for course in ("rectangle", "stairs"):
         for method in METHODS:
-            assert f"{course:<10} {method:<8}" in text
+            assert f"{course:<10} {method:<9}" in text
     assert "mean/single" in text and "mean/classic" in text and out.exists()
     assert _rows(out, DualPaths("rectangle").track("footnav")) > 0

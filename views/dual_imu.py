@@ -28,6 +28,7 @@ METHOD_COLORS: dict[str, tuple[int, int, int]] = {
     "single": (230, 80, 60),
     "classic": (200, 160, 0),
     "paper": (160, 90, 220),
+    "paper-3c": (220, 160, 250),
     "footnav": (0, 200, 120),
     "imu1": (0, 160, 255),
     "imu2": (255, 140, 0),

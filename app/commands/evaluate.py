@@ -12,14 +12,22 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from footnav.app.commands.export import lead_in_note, navigate_recording
 from footnav.app.status import input_handling
 from footnav.device.files.capture import MCAP_MAGIC
-from footnav.device.files.recordings import detect_format, load_recording
+from footnav.device.files.recordings import Recording, detect_format, load_recording
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.metrics import armse_2d_pyshoe, ate, loop_closure_error, path_length_m
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from distributed import Client
+    from footnav.app.commands.batch import FileResult
+
+F64 = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -39,6 +47,8 @@ class Evaluation:
     loop_2d_m: float = math.nan
     handling: str = ""
     """What was done with doubtful input (``footnav.app.status.input_handling``; empty: nothing)."""
+    feet: str = ""
+    """Of a pair of feet (:func:`evaluate_pair`): ``"coupled"`` or ``"independent"``; empty for one foot."""
 
     @property
     def end_point_pct(self) -> float:
@@ -64,27 +74,32 @@ def evaluate_file(path: Path, smooth: str | None = None, stance_levels: bool = T
             f"{path} is a footnav capture: it records no ground truth and no known closed loop, so there is "
             "nothing to measure it against (`footnav export` writes its track, `footnav replay` shows it)"
         )
-    rec = load_recording(path)
-    if rec.gt_pos_m is None and not rec.closed_loop:
-        raise FootnavError(f"{path}: no ground truth and not a known closed loop; nothing to measure against")
+    rec = _measurable(load_recording(path), path)
     nav, stats = navigate_recording(rec, smooth=smooth, stance_levels=stance_levels)
     # scored from the first still period, where the track's frame is defined, as before the samples before it were
     # navigated (backwards from it, ``footnav.pipeline.navigation.lead_in``): the figures stay comparable
-    est = nav.pos_n_m[stats.samples_navigated_backwards :]
-    skipped = stats.samples_before_alignment
     lead_in = f"{note} (not scored)" if (note := lead_in_note(stats).removeprefix(", ")) else ""
     handling = ", ".join(h for h in (input_handling(stats), lead_in) if h)
+    est = nav.pos_n_m[stats.samples_navigated_backwards :]
+    return score(rec, est, stats.samples_before_alignment, name=rec.name, samples=len(nav), handling=handling)
+
+
+def score(
+    rec: Recording, est_n_m: F64, skipped: int, *, name: str, samples: int, handling: str = "", feet: str = ""
+) -> Evaluation:
+    """The figures of one foot's track ``est_n_m`` (m, samples ``skipped`` on of ``rec``) against the recording's
+    ground truth, or its loop closure when it has none."""
     if rec.gt_pos_m is not None:
         gt = rec.gt_pos_m[skipped:] - rec.gt_pos_m[skipped]
-        fit = ate(est, gt, mirror_test=True)
-        est_for_end = est * np.array([1.0, -1.0, 1.0]) if fit.mirrored else est
+        fit = ate(est_n_m, gt, mirror_test=True)
+        est_for_end = est_n_m * np.array([1.0, -1.0, 1.0]) if fit.mirrored else est_n_m
         c, s = math.cos(fit.yaw_rad), math.sin(fit.yaw_rad)
         rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         aligned = (est_for_end - est_for_end.mean(axis=0)) @ rot.T + gt.mean(axis=0)
         return Evaluation(
-            name=rec.name,
+            name=name,
             format=rec.format,
-            samples=len(nav),
+            samples=samples,
             distance_m=path_length_m(gt[:: max(1, round(rec.rate_hz / 20))]),
             armse_2d_m=armse_2d_pyshoe(est_for_end, gt),
             ate_2d_m=fit.rmse_2d_m,
@@ -92,18 +107,77 @@ def evaluate_file(path: Path, smooth: str | None = None, stance_levels: bool = T
             mirrored=fit.mirrored,
             end_point_m=float(np.linalg.norm(aligned[-1] - gt[-1])),
             handling=handling,
+            feet=feet,
         )
-    loop_3d, loop_2d = loop_closure_error(est)
+    loop_3d, loop_2d = loop_closure_error(est_n_m)
     return Evaluation(
-        name=rec.name,
+        name=name,
         format=rec.format,
-        samples=len(nav),
-        distance_m=path_length_m(est[:: max(1, round(rec.rate_hz / 20))]),
+        samples=samples,
+        distance_m=path_length_m(est_n_m[:: max(1, round(rec.rate_hz / 20))]),
         loop_3d_m=loop_3d,
         loop_2d_m=loop_2d,
         end_point_m=loop_3d,
         handling=handling,
+        feet=feet,
     )
+
+
+def evaluate_pair(
+    left: Path, right: Path, *, independent_only: bool = False, heading: bool = False, stance_levels: bool = True
+) -> list[Evaluation]:
+    """A left and a right recording navigated together (``footnav.app.api.feet.navigate_pair``), each foot
+    measured as :func:`evaluate_file` measures one: coupled by the inter-foot distance bound (and, when
+    ``heading``, their relative heading in stance: ``footnav.pipeline.two_feet.heading``), then independent
+    (only independent when ``independent_only``).
+
+    Raises
+    ------
+    FootnavError
+        a file cannot be read or measured, or the two do not overlap in time.
+    """
+    from footnav.app.api.feet import navigate_pair
+    from footnav.pipeline.two_feet import FootSeparation
+    from footnav.pipeline.two_feet.heading import RelativeHeading
+
+    recs = [_measurable(load_recording(p), p) for p in (left, right)]
+    rows: list[Evaluation] = []
+    for coupled in (False,) if independent_only else (True, False):
+        bound = FootSeparation(heading=RelativeHeading() if heading else None)
+        result = navigate_pair(recs[0], recs[1], coupled=coupled, bound=bound, stance_levels=stance_levels)
+        how = "coupled" if coupled else "independent"
+        feet = ((result.left, result.left_stats), (result.right, result.right_stats))
+        for side, rec, (nav, stats) in zip(("L", "R"), recs, feet, strict=True):
+            assert nav is not None  # navigate_pair raises otherwise
+            name = f"{side} {how} {rec.name}"
+            rows.append(score(rec, nav.pos_n_m, stats.samples_before_alignment, name=name, samples=len(nav), feet=how))
+    return rows
+
+
+def pair_summary(rows: list[Evaluation]) -> str:
+    """One line per way of navigating the feet: the two feet's mean ATE-2D (or 2D loop closure) and end-point
+    error, and the coupled solution's change against the independent one, %."""
+    lines = []
+    means: dict[str, float] = {}
+    for how in ("coupled", "independent"):
+        feet = [r for r in rows if r.feet == how]
+        if not feet:
+            continue
+        err = [r.ate_2d_m if not math.isnan(r.ate_2d_m) else r.loop_2d_m for r in feet]
+        means[how] = float(np.mean(err))
+        end = float(np.mean([r.end_point_m for r in feet]))
+        what = "ATE-2D" if not math.isnan(feet[0].ate_2d_m) else "loop closure 2D"
+        lines.append(f"two feet {how + ':':<13} mean {what} {means[how]:.3f} m, end point {end:.3f} m")
+    if len(means) == 2:
+        change = 100.0 * (means["coupled"] / means["independent"] - 1.0)
+        lines.append(f"coupled against independent: {change:+.1f} %")
+    return "\n".join(lines)
+
+
+def _measurable(rec: Recording, path: Path) -> Recording:
+    if rec.gt_pos_m is None and not rec.closed_loop:
+        raise FootnavError(f"{path}: no ground truth and not a known closed loop; nothing to measure against")
+    return rec
 
 
 def _is_capture(path: Path) -> bool:
@@ -149,8 +223,9 @@ def format_table(rows: list[Evaluation]) -> str:
             f"{_fmt(r.ate_3d_m)} {'yes' if r.mirrored else 'no':>6} {_fmt(r.end_point_m)} "
             f"{_fmt(r.end_point_pct, 6, 2)} {_fmt(r.loop_3d_m)} {_fmt(r.loop_2d_m)} {_fmt(r.loop_pct, 6, 2)}"
         )
-    armse = np.array([r.armse_2d_m for r in rows if not math.isnan(r.armse_2d_m)])
-    loops = [r for r in rows if not math.isnan(r.loop_3d_m)]
+    # per file; two feet's rows are summed up by ``pair_summary``
+    armse = np.array([r.armse_2d_m for r in rows if not (math.isnan(r.armse_2d_m) or r.feet)])
+    loops = [r for r in rows if not (math.isnan(r.loop_3d_m) or r.feet)]
     lines.append("")
     if armse.size:
         lines.append(
@@ -169,15 +244,37 @@ def format_table(rows: list[Evaluation]) -> str:
     return "\n".join(lines)
 
 
-def run_evaluate(
-    paths: list[Path], smooth: str | None = None, stance_levels: bool = True, jobs: int | None = 1
-) -> tuple[list[Evaluation], list[str]]:
-    """Evaluate every recording found, on ``jobs`` processes (None: one per core; ``footnav.app.commands.batch``);
-    returns the rows and one-line problems (files that failed), in the order of the files."""
+def evaluate_files(
+    paths: list[Path],
+    smooth: str | None = None,
+    stance_levels: bool = True,
+    jobs: int | None = 1,
+    client: Client | None = None,
+) -> list[FileResult[Evaluation]]:
+    """Evaluate every recording found, on ``jobs`` processes (None: one per core) or on ``client``'s Dask cluster
+    (``footnav.app.commands.batch.run_files``); each file's :class:`Evaluation` or failure, in the order of the files.
+
+    Raises
+    ------
+    FootnavError
+        no recordings found in ``paths``.
+    """
     from footnav.app.commands.batch import run_files
 
     files = find_recordings(paths)
     if not files:
         raise FootnavError("no recordings found in " + ", ".join(str(p) for p in paths))
-    results = run_files(partial(evaluate_file, smooth=smooth, stance_levels=stance_levels), files, jobs, "evaluate")
+    task = partial(evaluate_file, smooth=smooth, stance_levels=stance_levels)
+    return run_files(task, files, jobs, "evaluate", client=client)
+
+
+def run_evaluate(
+    paths: list[Path],
+    smooth: str | None = None,
+    stance_levels: bool = True,
+    jobs: int | None = 1,
+    client: Client | None = None,
+) -> tuple[list[Evaluation], list[str]]:
+    """:func:`evaluate_files`, as the rows and one-line problems (files that failed), in the order of the files."""
+    results = evaluate_files(paths, smooth, stance_levels, jobs, client)
     return [r.value for r in results if r.value is not None], [r.error for r in results if r.error]

@@ -3,7 +3,7 @@
 For each course (the 18 × 9 m rectangle walked once round; the stair course: 24 steps of
 0.343 m × 0.16 m up, the 6.415 × 1.26 m landing, and back down) and each seed, the emulator walks a
 dual-IMU board (lever arm 1 cm, 1 cm, 0; two ICM-20948-class IMUs with independent errors) and
-four filters navigate the same record with the same stance samples (footnav's SHOE detector with
+the filters navigate the same record with the same stance samples (footnav's SHOE detector with
 its adaptive threshold, run on IMU 1):
 
 - ``single``: footnav's 15-state ESKF (ZUPT + χ²-gated ZARU, both biases estimated) on IMU 1;
@@ -11,10 +11,15 @@ its adaptive threshold, run on IMU 1):
   filter: position, velocity, attitude; Nilsson et al. 2012), the gyro bias fixed at IMU 1's mean
   rate over the first second of standing (the start-up calibration the paper filter gets too);
 - ``paper``: the reconstructed filter of Chen et al. (2022), :mod:`footnav.pipeline.dual_imu.chen2022`;
-- ``footnav``: footnav's rigid-board dual-IMU ESKF, :mod:`footnav.pipeline.dual_imu.board_eskf`.
+- ``paper-3c``: the same filter on the stance samples of the paper's own three-condition detector
+  (:mod:`footnav.pipeline.stance.combined`) instead of the shared SHOE ones;
+- ``footnav``: footnav's rigid-board dual-IMU ESKF, :mod:`footnav.pipeline.dual_imu.board_eskf`;
+- ``foot2foot``: the paper's second reference, one IMU on each foot and the feet's filters bounded by
+  their largest separation (:mod:`footnav.pipeline.two_feet`, R = 1.2 m; Skog et al. 2012), on the two
+  feet of a walker of the same course (``two_feet_walks``, IMUs of the same grade, the left foot scored).
 
-Errors are 3D distances from IMU 1's true position at every sample; per run the maximum and the
-mean, then averaged over the seeds. Every filter is zero-velocity aiding alone: the single-IMU
+Errors are 3D distances from IMU 1's (foot2foot: the left foot's) true position at every sample; per
+run the maximum and the mean, then averaged over the seeds. Every filter is zero-velocity aiding alone: the single-IMU
 navigator's stance height constraint (``footnav.pipeline.stance.levels``), which the dual-IMU filter does not
 have, is off, so the table measures what the second IMU adds.
 """
@@ -28,13 +33,15 @@ from pathlib import Path
 from typing import Final
 
 import numpy as np
+from footnav.device.emulator.motion.gait import two_feet_walks
 from footnav.device.emulator.sensors.dual_imu import (
     DEFAULT_GRADE,
     DEFAULT_LEVER_B_M,
     DualImuRecording,
+    one_lap_duration_s,
     simulate_dual_imu,
 )
-from footnav.device.emulator.sensors.imu_errors import AXIS_ERRORS
+from footnav.device.emulator.sensors.imu_errors import AXIS_ERRORS, corrupt
 from footnav.pipeline.dual_imu.board_eskf import DualEskfConfig, DualEskfTrack, run_dual_eskf
 from footnav.pipeline.dual_imu.chen2022 import DualTrack, PaperConfig, run_paper
 from footnav.pipeline.navigation import eskf
@@ -42,7 +49,9 @@ from footnav.pipeline.navigation.alignment import align_from_still
 from footnav.pipeline.navigation.batches import NO_CLIPPED_RATES, zupt_ratio
 from footnav.pipeline.navigation.navigator import NavConfig, filter_parameters, navigate
 from footnav.pipeline.navigation.profiles import UnitProfile, get_profile
+from footnav.pipeline.stance.combined import combined_stance
 from footnav.pipeline.stance.detectors import StreamingDetector
+from footnav.pipeline.two_feet import FootSeparation, FootSignals, navigate_feet
 from footnav.views.dual_imu import DualRunView, save_dual_runs
 from numpy.typing import NDArray
 
@@ -50,13 +59,19 @@ F64 = NDArray[np.float64]
 
 
 COURSES: Final = ("rectangle", "stairs")
-METHODS: Final = ("single", "classic", "paper", "footnav")
+BOARD_METHODS: Final = ("single", "classic", "paper", "paper-3c", "footnav")
+"""The methods that navigate the dual-IMU board's record."""
+METHODS: Final = (*BOARD_METHODS, "foot2foot")
 LABELS: Final = {
     "single": "single-IMU ZUPT: footnav 15-state ESKF (ZUPT + gated ZARU, biases estimated), IMU 1",
     "classic": "classic ZUPT: the same filter, bias states frozen (OpenShoe 9-state), IMU 1; gyro bias = mean "
     "rate of the first 1 s still (the paper filter's start-up calibration), accelerometer bias 0",
     "paper": "paper (Chen et al. 2022, reconstructed): linear KF [r1 r2 v1 v2], eqs. 17-19",
+    "paper-3c": "the paper's filter on the stance samples of its own three-condition detector (acceleration "
+    "magnitude and variance, angular rate; its section 3) instead of SHOE",
     "footnav": "footnav dual: rigid-board ESKF on both IMUs, both bias sets, rigid-body constraints",
+    "foot2foot": "foot-to-foot: an IMU on each foot, footnav's filter on each, coupled by the inter-foot distance "
+    "bound R = 1.2 m (the paper's second reference); the left foot, on its own two-feet walk of the course",
 }
 PROFILE: Final = "generic"
 """The filters' noise model: a single ICM-20948-class part (``footnav.pipeline.navigation.profiles``)."""
@@ -140,9 +155,10 @@ def evaluate_run(
     lever_b_m: tuple[float, float, float] = DEFAULT_LEVER_B_M,
     grade: str = DEFAULT_GRADE,
     axes: str = "none",
+    rate_hz: float = 1000.0,
 ) -> RunResult:
     """Walk ``course`` once with seed ``seed`` and navigate it with every method."""
-    rec = simulate_dual_imu(course, seed=seed, lever_b_m=lever_b_m, grade=grade, axes=axes)
+    rec = simulate_dual_imu(course, seed=seed, lever_b_m=lever_b_m, grade=grade, axes=axes, rate_hz=rate_hz)
     profile = get_profile(PROFILE)
     nav_config = NavConfig(profile=profile, stance_levels=False)
     acc1 = np.ascontiguousarray(rec.acc_b_mps2[:, 0])
@@ -173,9 +189,14 @@ def evaluate_run(
         zupt_ratio(stat, threshold),
     )
     tracks["paper"] = paper.pos1_n_m
+    stance_3c = combined_stance(acc1, gyr1, rec.rate_hz)
+    tracks["paper-3c"] = run_paper(
+        rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, stance_3c, lever, rec.rate_hz, PaperConfig(profile=profile)
+    ).pos1_n_m
     tracks["footnav"] = footnav.pos1_n_m
     truth = rec.truth.imu1.pos_n_m
-    errors = {m: np.linalg.norm(tracks[m] - truth, axis=1) for m in METHODS}
+    errors = {m: np.linalg.norm(tracks[m] - truth, axis=1) for m in BOARD_METHODS}
+    errors["foot2foot"] = foot_to_foot_errors(course, seed, grade=grade, axes=axes, config=nav_config, rate_hz=rate_hz)
     return RunResult(
         recording=rec,
         stance=stance,
@@ -185,6 +206,28 @@ def evaluate_run(
         paper=paper,
         footnav=footnav,
     )
+
+
+def foot_to_foot_errors(
+    course: str, seed: int, *, grade: str, axes: str, config: NavConfig, rate_hz: float = 1000.0
+) -> F64:
+    """(n,) 3D error of the left foot at every sample, m, of one lap of ``course`` walked by two feet, each
+    with its own IMU of ``grade`` (independent errors), navigated coupled by the distance bound."""
+    _, lap_s = one_lap_duration_s(course, 1.4, 3.0)
+    gait_seed, seed_l, seed_r = (int(s.generate_state(1)[0]) for s in np.random.SeedSequence([seed, 2]).spawn(3))
+    feet = two_feet_walks(course, lap_s, rate_hz, seed=gait_seed)
+    signals = []
+    for truth, imu_seed in zip(feet, (seed_l, seed_r), strict=True):
+        acc, gyr, _ = corrupt(truth.acc_b_mps2, truth.gyr_b_radps, truth.rate_hz, grade, imu_seed, axes=axes)
+        signals.append(FootSignals(truth.t_s, acc, gyr, truth.rate_hz))
+    result = navigate_feet(signals[0], signals[1], config, FootSeparation())
+    left = feet[0].pos_n_m
+    err = np.full(left.shape[0], np.nan)
+    if result.left is not None:
+        err[left.shape[0] - len(result.left) :] = np.linalg.norm(
+            result.left.pos_n_m - left[-len(result.left) :], axis=1
+        )
+    return err
 
 
 @dataclass(frozen=True, slots=True)
@@ -197,6 +240,7 @@ class TableRow:
     mean_error_m: float
     ratio_to_single: float
     ratio_to_classic: float
+    ratio_to_foot2foot: float
 
 
 def error_table(
@@ -205,6 +249,7 @@ def error_table(
     *,
     first_runs: dict[str, RunResult] | None = None,
     axes: str = "none",
+    rate_hz: float = 1000.0,
 ) -> list[TableRow]:
     """Run every course and seed; average the per-run max and mean errors over the seeds.
 
@@ -212,34 +257,45 @@ def error_table(
     """
     rows: list[TableRow] = []
     for course in courses:
-        runs = [evaluate_run(course, s, axes=axes) for s in seeds]
+        runs = [evaluate_run(course, s, axes=axes, rate_hz=rate_hz) for s in seeds]
         if first_runs is not None:
             first_runs[course] = runs[0]
         mx = {m: float(np.mean([r.max_error_m[m] for r in runs])) for m in METHODS}
         mean = {m: float(np.mean([r.mean_error_m[m] for r in runs])) for m in METHODS}
         rows.extend(
-            TableRow(course, m, mx[m], mean[m], mean[m] / mean["single"], mean[m] / mean["classic"]) for m in METHODS
+            TableRow(
+                course,
+                m,
+                mx[m],
+                mean[m],
+                mean[m] / mean["single"],
+                mean[m] / mean["classic"],
+                mean[m] / mean["foot2foot"],
+            )
+            for m in METHODS
         )
     return rows
 
 
-def format_table(rows: list[TableRow], seeds: list[int], axes: str = "none") -> str:
+def format_table(rows: list[TableRow], seeds: list[int], axes: str = "none", rate_hz: float = 1000.0) -> str:
     """The table as text, with the methods spelled out underneath."""
     lines = [
         f"position error of IMU 1 (3D, every sample), mean over seeds {seeds[0]}..{seeds[-1]} ({len(seeds)} runs "
         "per course)",
-        f"{'course':<10} {'method':<8} {'max m':>7} {'mean m':>7} {'mean/single':>12} {'mean/classic':>13}",
+        f"{'course':<10} {'method':<9} {'max m':>7} {'mean m':>7} {'mean/single':>12} {'mean/classic':>13} "
+        f"{'mean/f2f':>10}",
     ]
     lines += [
-        f"{r.course:<10} {r.method:<8} {r.max_error_m:7.3f} {r.mean_error_m:7.3f} {r.ratio_to_single:12.2f} "
-        f"{r.ratio_to_classic:13.2f}"
+        f"{r.course:<10} {r.method:<9} {r.max_error_m:7.3f} {r.mean_error_m:7.3f} {r.ratio_to_single:12.2f} "
+        f"{r.ratio_to_classic:13.2f} {r.ratio_to_foot2foot:10.2f}"
         for r in rows
     ]
     lines.append("")
-    lines += [f"{m:<8} {LABELS[m]}" for m in METHODS]
+    lines += [f"{m:<9} {LABELS[m]}" for m in METHODS]
     lines.append(
         "same record and same stance samples for all (SHOE detector, adaptive threshold, on IMU 1); "
-        f"IMUs: {DEFAULT_GRADE} grade, axis errors {axes!r}, independent errors; lever arm {DEFAULT_LEVER_B_M} m; "
+        f"IMUs: {DEFAULT_GRADE} grade at {rate_hz:g} Hz, axis errors {axes!r}, independent errors; "
+        f"lever arm {DEFAULT_LEVER_B_M} m; "
         f"filter profile {PROFILE!r}"
     )
     return "\n".join(lines)
@@ -258,14 +314,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="none",
         help="scale-factor and cross-axis errors of both emulated IMUs (default none)",
     )
+    parser.add_argument(
+        "--rate",
+        type=float,
+        default=1000.0,
+        metavar="HZ",
+        help="the emulated IMUs' sample rate (default 1000; the paper: 100)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     """Print the table (and write the recording with ``--save``)."""
     seeds = list(range(args.first_seed, args.first_seed + max(1, args.seeds)))
     runs: dict[str, RunResult] = {}
-    rows = error_table(seeds, first_runs=runs, axes=args.axis_errors)
-    print(format_table(rows, seeds, args.axis_errors))
+    rows = error_table(seeds, first_runs=runs, axes=args.axis_errors, rate_hz=args.rate)
+    print(format_table(rows, seeds, args.axis_errors, args.rate))
     if args.save is not None:
         save_dual_runs(args.save, {c: view_of(r) for c, r in runs.items()})
         print(f"recording of seed {seeds[0]} written to {args.save} (open it with: rerun {args.save})")

@@ -49,6 +49,9 @@ class Recording:
         the walker returned to the start (loop-closure error is meaningful).
     notes
         facts about the file a person should know (handedness conversions, dropped rows).
+    t_start_s
+        time of the first sample on the file's own clock, s (``t_s`` starts at 0): what puts two feet's
+        files on one clock.
     """
 
     name: str
@@ -61,6 +64,7 @@ class Recording:
     gt_pos_m: F64 | None = None
     closed_loop: bool = False
     notes: list[str] = field(default_factory=list)
+    t_start_s: float = 0.0
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -140,13 +144,14 @@ def load_pyshoe_mat(path: Path) -> Recording:
         else:
             gt = None
             notes.append("ground truth is not one (x, y, z) row per IMU sample; ignored")
+    rate_hz = _nominal_rate(t, path)  # first: a bad first time stamp is named, never subtracted
     return Recording(
         name=path.stem,
         format="pyshoe",
         t_s=t - t[0],
         acc_b_mps2=imu[:, :3].copy(),
         gyr_b_radps=imu[:, 3:].copy(),
-        rate_hz=_nominal_rate(t, path),
+        rate_hz=rate_hz,
         profile="gx3",
         gt_pos_m=gt,
         notes=notes,
@@ -203,13 +208,14 @@ def load_xio_csv(path: Path) -> Recording:
         raise InputFormatError(f"{path}: expected an x-io CSV with columns {', '.join(XIO_COLUMNS)}; got {header}")
     data = _read_numeric_csv(path, skip=1, ncols=7)
     t = data[:, 0]
+    rate_hz = _nominal_rate(t, path)  # first: a bad first time stamp is named, never subtracted
     return Recording(
         name=path.stem,
         format="xio",
         t_s=t - t[0],
         acc_b_mps2=data[:, 4:7] * G0_MPS2,
         gyr_b_radps=data[:, 1:4] * DEG,
-        rate_hz=_nominal_rate(t, path),
+        rate_hz=rate_hz,
         profile="generic",
         closed_loop=True,
         notes=["x-io sample walk: the foot ends where it started"],
@@ -243,13 +249,14 @@ def load_openshoe_txt(path: Path) -> Recording:
     notes = ["OpenShoe walk: the walker returned to the start within ±1 cm"]
     if skipped:
         notes.append(f"{skipped} malformed rows skipped")
+    rate_hz = _nominal_rate(t, path)  # first: a bad first time stamp is named, never subtracted
     return Recording(
         name=path.stem,
         format="openshoe",
         t_s=t - t[0],
         acc_b_mps2=data[:, 0:3] * G0_MPS2,
         gyr_b_radps=data[:, 3:6].copy(),
-        rate_hz=_nominal_rate(t, path),
+        rate_hz=rate_hz,
         profile="gx3",
         closed_loop=True,
         notes=notes,
@@ -277,6 +284,9 @@ class CsvMapping:
         unit profile of the sensor.
     closed_loop
         the walk ends at its start.
+    gt
+        three column names of a ground-truth position (right-handed, z up), m; read when the header has
+        them (default ``gt_x_m``, ``gt_y_m``, ``gt_z_m``).
     """
 
     time: str = "t"
@@ -287,6 +297,7 @@ class CsvMapping:
     gyr_unit: str = "rad/s"
     profile: str = "generic"
     closed_loop: bool = False
+    gt: tuple[str, str, str] = ("gt_x_m", "gt_y_m", "gt_z_m")
 
     @staticmethod
     def parse(spec: str) -> CsvMapping:
@@ -300,6 +311,11 @@ class CsvMapping:
                 fields["time"] = names
                 if unit:
                     fields["time_unit"] = unit
+            elif key == "gt":
+                gt = tuple(names.split(";"))
+                if len(gt) != 3:
+                    raise InputFormatError(f"--columns gt= needs three column names separated by ';', got {names!r}")
+                fields["gt"] = gt
             elif key in ("acc", "gyr"):
                 cols = tuple(names.split(";"))
                 if len(cols) != 3:
@@ -312,7 +328,7 @@ class CsvMapping:
             elif key == "closed_loop":
                 fields["closed_loop"] = value.lower() in ("1", "true", "yes")
             else:
-                raise InputFormatError(f"unknown --columns key {key!r}; use time, acc, gyr, profile, closed_loop")
+                raise InputFormatError(f"unknown --columns key {key!r}; use time, acc, gyr, gt, profile, closed_loop")
         return CsvMapping(**fields)  # type: ignore[arg-type]
 
 
@@ -327,7 +343,9 @@ def load_generic_csv(path: Path, mapping: CsvMapping | None = None) -> Recording
         if unit not in table:
             raise InputFormatError(f"unknown {what} unit {unit!r}; known: {', '.join(table)}")
     header = [h.strip() for h in _csv_header(path)]
-    wanted = [m.time, *m.acc, *m.gyr]
+    # ground truth when the header has its columns, or when --columns names them (then they must be there)
+    with_gt = m.gt != CsvMapping.gt or all(c in header for c in m.gt)
+    wanted = [m.time, *m.acc, *m.gyr, *(m.gt if with_gt else ())]
     missing = [c for c in wanted if c not in header]
     if missing:
         if not any(header):
@@ -342,15 +360,18 @@ def load_generic_csv(path: Path, mapping: CsvMapping | None = None) -> Recording
         raise InputFormatError(f"{path}: {noun} {', '.join(missing)} not found; the header has {', '.join(header)}")
     data = _read_numeric_csv(path, skip=1, ncols=len(header))[:, [header.index(c) for c in wanted]]
     t = data[:, 0] * TIME_UNITS[m.time_unit]
+    rate_hz = _nominal_rate(t, path)  # first: a bad first time stamp is named, never subtracted
     return Recording(
         name=path.stem,
         format="csv",
         t_s=t - t[0],
         acc_b_mps2=data[:, 1:4] * ACC_UNITS[m.acc_unit],
         gyr_b_radps=data[:, 4:7] * GYR_UNITS[m.gyr_unit],
-        rate_hz=_nominal_rate(t, path),
+        rate_hz=rate_hz,
         profile=m.profile,
+        gt_pos_m=data[:, 7:10].copy() if with_gt else None,
         closed_loop=m.closed_loop,
+        t_start_s=float(t[0]),
     )
 
 

@@ -5,6 +5,8 @@ from typing import TYPE_CHECKING
 from footnav.pipeline._lazy import lazy_exports
 
 if TYPE_CHECKING:
+    from .combined import CombinedDetectorParams as CombinedDetectorParams
+    from .combined import combined_stance as combined_stance
     from .detectors import DETECTOR_KINDS as DETECTOR_KINDS
     from .detectors import DetectorKind as DetectorKind
     from .detectors import DetectorParams as DetectorParams
