@@ -93,6 +93,8 @@ def _evaluate_feet(args: argparse.Namespace) -> int:
         raise FootnavError("two feet are evaluated as --left FILE --right FILE, without other recordings")
     if args.smooth:
         raise FootnavError("--smooth applies to one foot's recording; two feet are evaluated with the causal filter")
+    if args.jobs is not None or args.scheduler:
+        raise FootnavError("--jobs and --scheduler are for a folder or several files; two feet run in this process")
     if args.couple_heading and args.independent_feet:
         raise FootnavError("--couple-heading couples the feet; --independent-feet does not: give one of them")
     rows = evaluate_pair(

@@ -23,7 +23,7 @@ import numpy as np
 from footnav.app import heap
 from footnav.app.calibration_store import StoredCalibration, any_calibrations, calibration_dir, load_calibration
 from footnav.app.config import Config
-from footnav.app.session import CalibrationLookup, LinkHealth
+from footnav.app.session import CalibrationLookup, LinkHealth, UnitAddress
 from footnav.app.status import StatusLine, input_handling
 from footnav.app.stream import SerialSessionResult
 from footnav.device.errors import DeviceError
@@ -305,34 +305,68 @@ def link_summary(run: FootRun) -> str:
 
 
 def foot_sinks(
-    run: FootRun,
-    views: SessionViews | None,
-    status: StatusLine,
-    *,
-    two_feet: bool,
-    put_timeout_s: float = 0.0,
-    lsl: LslOutlets | None = None,
+    run: FootRun, views: SessionViews | None, status: StatusLine, *, two_feet: bool, put_timeout_s: float = 0.0
 ) -> None:
-    """Wire a foot to the views (display-offset when two feet), the status line, link health and,
-    with ``--lsl``, the LSL outlets (the foot's own origin, no display offset; Rerun or not)."""
+    """Wire a foot to the views (display-offset when two feet), the status line and link health
+    (the LSL outlets, with ``--lsl``, are wired by :func:`open_lsl_outlets`)."""
     run.sinks = [status.foot(run.foot)]
     run.views = views
     if views is not None:
-        display: NavSink = views.sink(run.foot, timeout_s=put_timeout_s)
-        if two_feet and run.foot in FOOT_START_OFFSET_M:
+        display = views.sink(run.foot, timeout_s=put_timeout_s)
+        if two_feet:
             display = offset_sink(display, FOOT_START_OFFSET_M[run.foot])
         run.health = LinkHealth(views.log_link, run.foot, clock_rate_hz=lambda: run.result.clock_rate_hz)
         run.sinks = [display, run.health, *run.sinks]
-    if lsl is not None:
-        run.sinks.append(lsl.sink(run.foot))
+
+
+BLE_FIRST_FOUND = "ble:first-found"
+"""The LSL identity of a unit given as ``ble:`` alone (:func:`lsl_identity`)."""
+
+
+def lsl_identity(address: UnitAddress) -> str:
+    """A live unit's identity in its LSL ``source_id`` (``footnav.views.lsl.source_id``): the serial port,
+    or ``ble:NAME`` / ``ble:ADDRESS`` as given; :data:`BLE_FIRST_FOUND` for ``ble:`` alone. The outlets are
+    made before the link finds the unit (``--lsl-wait`` holds the session before its first sample) and a
+    ``source_id`` cannot change afterwards, so the first unit found is not named: the same id, whichever
+    unit answers."""
+    if address.transport == "ble" and not address.target:
+        return BLE_FIRST_FOUND
+    return str(address)
+
+
+def check_lsl(feet: Sequence[LslFoot] | None) -> None:
+    """Fail before a session starts if its ``--lsl`` cannot work (nothing to check without ``--lsl``); say so
+    if a ``source_id`` names no unit (:func:`lsl_identity`).
+
+    Raises
+    ------
+    FootnavError
+        pylsl is missing or cannot load liblsl (``footnav.views.lsl.import_pylsl``).
+    """
+    if feet is None:
+        return
+    from footnav.views.lsl import import_pylsl
+
+    import_pylsl()
+    if any(f.identity == BLE_FIRST_FOUND for f in feet):
+        notice(
+            f"LSL: with ble: alone the source_id names no unit ({BLE_FIRST_FOUND}); give ble:NAME or ble:ADDRESS "
+            "(footnav scan lists them) for an id that LabRecorder finds again"
+        )
 
 
 def open_lsl_outlets(
-    feet: Sequence[LslFoot] | None, *, wait_s: float = 0.0, max_buffered_s: int | None = None
+    feet: Sequence[LslFoot] | None,
+    runs: Sequence[FootRun] = (),
+    *,
+    wait_s: float = 0.0,
+    max_buffered_s: int | None = None,
 ) -> LslOutlets | None:
-    """The session's LSL outlets (None without ``--lsl``), with a line on stderr naming the streams;
-    with ``wait_s`` > 0, once every stream has a consumer or ``wait_s`` has passed (``--lsl-wait``).
-    ``max_buffered_s``: what each outlet keeps for a lagging consumer (None: liblsl's default).
+    """The session's LSL outlets (None without ``--lsl``), each of ``runs`` wired to its foot's outlet, with
+    a line on stderr naming the streams; with ``wait_s`` > 0, once every stream has a consumer or ``wait_s``
+    has passed (:func:`wait_lsl_consumers`; outlets are closed again if the wait is interrupted).
+    ``max_buffered_s``: what each outlet keeps for a lagging consumer (None: liblsl's default). Call it
+    inside the ``try`` whose ``finally`` calls :func:`close_lsl_outlets`.
 
     Raises
     ------
@@ -346,9 +380,27 @@ def open_lsl_outlets(
     lsl = open_lsl(feet, max_buffered_s=max_buffered_s or MAX_BUFFERED_S)
     names = [f"'footnav {f.foot} navigation' ({source_id(f.identity, f.foot)})" for f in feet]
     print(f"LSL: streaming {', '.join(names)} and 'footnav gait events'", file=sys.stderr)
-    if wait_s > 0:
-        lsl.wait_for_consumers(wait_s, notice=notice)
+    try:
+        wait_lsl_consumers(lsl, wait_s)
+    except BaseException:  # Ctrl-C during the wait: the caller never gets the outlets to close
+        close_lsl_outlets(lsl)
+        raise
+    for run in runs:
+        run.sinks.append(lsl.sink(run.foot))
     return lsl
+
+
+def wait_lsl_consumers(lsl: LslOutlets | None, wait_s: float) -> None:
+    """``--lsl-wait``: until every stream has a consumer or ``wait_s`` has passed (0: no wait), in slices
+    that Ctrl-C breaks into (``footnav.views.lsl.LslOutlets.wait_for_consumers``)."""
+    if lsl is not None and wait_s > 0:
+        lsl.wait_for_consumers(wait_s, notice=notice)
+
+
+async def wait_lsl_consumers_async(lsl: LslOutlets | None, wait_s: float) -> None:
+    """:func:`wait_lsl_consumers` on the event loop (a cancelled task stops at once)."""
+    if lsl is not None and wait_s > 0:
+        await lsl.wait_for_consumers_async(wait_s, notice=notice)
 
 
 def close_lsl_outlets(lsl: LslOutlets | None) -> None:

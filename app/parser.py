@@ -66,6 +66,14 @@ def _seconds(text: str) -> float:
     return value
 
 
+def _wait_seconds(text: str) -> float:
+    # a wait must end: liblsl returns at once from an infinite timeout, so `inf` would not wait at all
+    value = _number(text, "a finite time in seconds, >= 0")
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"expected a finite time in seconds, >= 0, got {text!r}")
+    return value
+
+
 def _walking_speed(text: str) -> float:
     lo, hi = WALKING_SPEED_MPS
     expected = f"a walking speed from {lo} to {hi} m/s (what the emulated gait covers)"
@@ -162,7 +170,7 @@ def _add_output_args(p: argparse.ArgumentParser, *, capture: bool) -> None:
     )
     p.add_argument(
         "--lsl-wait",
-        type=_seconds,
+        type=_wait_seconds,
         default=0.0,
         metavar="S",
         help="with --lsl: before the first sample, wait up to S seconds for a consumer of every stream (default 0)",

@@ -13,3 +13,7 @@ class FootnavError(Exception):
 
 class InputFormatError(FootnavError):
     """A file is not in the format that was expected; the message names the expected format."""
+
+
+class MissingExtraError(FootnavError, ImportError):
+    """An optional dependency is not installed; the message names the extra that installs it."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import pytest
@@ -15,6 +16,22 @@ def shared_data() -> Path:
     if not (SHARED_DATA / "DATA.md").exists():
         pytest.skip(f"real recordings not found at {SHARED_DATA} (the shared/ folder beside the checkout)")
     return SHARED_DATA
+
+
+FOLDER_TRIALS = ("2017-11-27-11-12-44.mat", "2017-12-15-18-01-18.mat", "2018-02-22-10-09-36.mat")
+"""The PyShoe trials of :func:`recordings_folder`."""
+
+
+@pytest.fixture(scope="module")
+def recordings_folder(shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A folder of real recordings: two PyShoe trials, a third in the subfolder ``vicon``, x-io's closed walk."""
+    root = tmp_path_factory.mktemp("recordings")
+    (root / "vicon").mkdir()
+    for name in FOLDER_TRIALS[:2]:
+        shutil.copy(shared_data / "pyshoe-vicon" / name, root / name)
+    shutil.copy(shared_data / "pyshoe-vicon" / FOLDER_TRIALS[2], root / "vicon" / FOLDER_TRIALS[2])
+    shutil.copy(shared_data / "xio-gait-tracking" / "short_walk.csv", root / "short_walk.csv")
+    return root
 
 
 @pytest.fixture(autouse=True)

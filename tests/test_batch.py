@@ -12,7 +12,9 @@ import pytest
 from footnav.app.commands.batch import export_destinations, run_files
 from footnav.pipeline.errors import FootnavError
 
-TRIALS = ("2017-11-27-11-12-44.mat", "2017-12-15-18-01-18.mat", "2018-02-22-10-09-36.mat")
+from tests.conftest import FOLDER_TRIALS
+
+TRIALS = FOLDER_TRIALS
 
 
 def _footnav(*args: str) -> subprocess.CompletedProcess[str]:
@@ -22,15 +24,8 @@ def _footnav(*args: str) -> subprocess.CompletedProcess[str]:
 
 
 @pytest.fixture(scope="module")
-def folder(shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A few real recordings, one in a subfolder, and a file that is no recording footnav reads as such."""
-    root = tmp_path_factory.mktemp("recordings")
-    (root / "vicon").mkdir()
-    for name in TRIALS[:2]:
-        shutil.copy(shared_data / "pyshoe-vicon" / name, root / name)
-    shutil.copy(shared_data / "pyshoe-vicon" / TRIALS[2], root / "vicon" / TRIALS[2])
-    shutil.copy(shared_data / "xio-gait-tracking" / "short_walk.csv", root / "short_walk.csv")
-    return root
+def folder(recordings_folder: Path) -> Path:
+    return recordings_folder
 
 
 def _tree(root: Path) -> dict[str, bytes]:

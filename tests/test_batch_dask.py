@@ -21,7 +21,9 @@ from footnav.app.commands.batch import run_files
 from footnav.app.commands.export import COLUMN_UNITS
 from footnav.pipeline.errors import FootnavError
 
-TRIALS = ("2017-11-27-11-12-44.mat", "2017-12-15-18-01-18.mat", "2018-02-22-10-09-36.mat")
+from tests.conftest import FOLDER_TRIALS
+
+TRIALS = FOLDER_TRIALS
 
 
 @pytest.fixture(scope="module")
@@ -44,15 +46,8 @@ def client(cluster: LocalCluster) -> Iterator[Client]:
 
 
 @pytest.fixture(scope="module")
-def folder(shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Three PyShoe trials (one in a subfolder) and an x-io closed walk."""
-    root = tmp_path_factory.mktemp("recordings")
-    (root / "vicon").mkdir()
-    for name in TRIALS[:2]:
-        shutil.copy(shared_data / "pyshoe-vicon" / name, root / name)
-    shutil.copy(shared_data / "pyshoe-vicon" / TRIALS[2], root / "vicon" / TRIALS[2])
-    shutil.copy(shared_data / "xio-gait-tracking" / "short_walk.csv", root / "short_walk.csv")
-    return root
+def folder(recordings_folder: Path) -> Path:
+    return recordings_folder
 
 
 def _footnav(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
@@ -185,9 +180,10 @@ def test_without_the_extras_the_errors_name_them(monkeypatch: pytest.MonkeyPatch
         batch_module.connect("tcp://127.0.0.1:8786")
     monkeypatch.setitem(sys.modules, "pyarrow", None)
     monkeypatch.setitem(sys.modules, "pyarrow.parquet", None)
-    (result,) = batch(folder / TRIALS[0], "export", out_dir=tmp_path, jobs=1, output_format="parquet")
-    assert result.value is None and "pip install 'footnav[parquet]'" in result.error
+    with pytest.raises(ImportError, match=r"pip install 'footnav\[parquet\]'"):  # a FootnavError too, before any work
+        batch(folder / TRIALS[0], "export", out_dir=tmp_path, jobs=1, output_format="parquet")
     assert not list(tmp_path.iterdir())
+    assert main(["export", str(folder / TRIALS[0]), "-o", str(tmp_path / "t.parquet")]) == 2
 
 
 def _exits_on_a(path: Path) -> str:

@@ -12,8 +12,11 @@ the network is seen; every resolve and pull has a timeout.
 
 from __future__ import annotations
 
+import _thread
+import asyncio
 import math
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -32,12 +35,25 @@ from footnav.app.commands.export import load_other_recording, navigate_recording
 from footnav.app.commands.replay import ReplayOptions, run_replay
 from footnav.app.commands.replay_recording import RecordingReplayOptions, run_recording_replay
 from footnav.app.config import defaults
+from footnav.app.feet import BLE_FIRST_FOUND, check_lsl, lsl_identity, open_lsl_outlets, wait_lsl_consumers_async
 from footnav.app.parser import build_parser
+from footnav.app.session import UnitAddress
 from footnav.device.files.capture import read_capture_info
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.gait.events import GaitEventTracker
 from footnav.pipeline.nav_types import NavBatch, concat_batches
-from footnav.views.lsl import EVENT_CHANNELS, FRAME, INSTALL_HINT, STATE_CHANNELS, LslFoot, LslRequest, open_lsl
+from footnav.views.lsl import (
+    EVENT_CHANNELS,
+    FRAME,
+    INSTALL_HINT,
+    STATE_CHANNELS,
+    WAIT_SLICE_S,
+    LslFoot,
+    LslRequest,
+    lsl_feet,
+    open_lsl,
+    source_id,
+)
 from footnav.views.strides import StrideTable
 
 DURATION_S = 20.0
@@ -318,3 +334,126 @@ def test_the_options_and_the_lazy_import() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=dict(os.environ))
     assert out.stdout.strip() == "False"  # pylsl loads only when --lsl is used
+
+
+@pytest.mark.parametrize("text", ["inf", "Infinity", "nan", "-1"])
+def test_lsl_wait_must_be_a_finite_time(text: str, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["demo", "--lsl", "--lsl-wait", text])
+    assert f"argument --lsl-wait: expected a finite time in seconds, >= 0, got {text!r}" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="finite time >= 0"):
+        LslRequest(wait_s=float(text))
+    args = build_parser().parse_args(["replay", "x.mcap", "--end", "inf", "--lsl-wait", "0"])
+    assert args.end == math.inf and args.lsl_wait == 0.0  # --end may stay open; only the wait must end
+
+
+def test_a_ctrl_c_during_the_wait_stops_it_within_a_slice_and_closes_the_outlets(
+    pylsl: Any, capsys: pytest.CaptureFixture[str]
+) -> None:
+    feet = [LslFoot("foot", f"test-interrupt-{uuid.uuid4().hex[:6]}", "test", 1000.0)]
+    timer = threading.Timer(0.5, _thread.interrupt_main)  # Ctrl-C (SIGINT) for the main thread
+    start = time.monotonic()
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        open_lsl_outlets(feet, wait_s=60.0)  # nobody consumes: it would wait the whole 60 s
+    waited = time.monotonic() - start
+    timer.join()
+    assert 0.5 <= waited < 0.5 + 10 * WAIT_SLICE_S  # stopped a slice after the interrupt, not after 60 s
+    err = capsys.readouterr().err
+    assert "LSL: waiting up to 60 s" in err
+    assert "LSL: samples streamed: foot 0; gait events: 0" in err  # closed by open_lsl_outlets itself
+
+
+def test_the_async_wait_stops_at_once_when_cancelled(pylsl: Any) -> None:
+    lsl = open_lsl([LslFoot("foot", f"test-cancel-{uuid.uuid4().hex[:6]}", "test", 1000.0)])
+
+    async def cancel_the_wait() -> float:
+        task = asyncio.create_task(wait_lsl_consumers_async(lsl, 60.0))
+        await asyncio.sleep(0.3)
+        start = time.monotonic()
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        return time.monotonic() - start
+
+    try:
+        assert asyncio.run(cancel_the_wait()) < WAIT_SLICE_S  # no C call or thread to wait out
+        assert lsl.missing_consumers() == ["footnav foot navigation", "footnav gait events"]
+    finally:
+        lsl.close()
+    with pytest.raises(ValueError, match="finite time >= 0"):
+        lsl.wait_for_consumers(math.inf, notice=print)
+
+
+def test_the_wait_ends_when_every_stream_has_a_consumer(pylsl: Any) -> None:
+    ident = f"test-consumer-{uuid.uuid4().hex[:6]}"
+    lsl = open_lsl([LslFoot("foot", ident, "test", 1000.0)])
+    inlets = []
+    try:
+        for sid in (source_id(ident, "foot"), source_id(ident, "events")):
+            (found,) = pylsl.resolve_byprop("source_id", sid, 1, 30.0)
+            inlet = pylsl.StreamInlet(found)
+            inlet.open_stream(timeout=10.0)
+            inlets.append(inlet)
+        notes: list[str] = []
+        assert lsl.wait_for_consumers(30.0, notice=notes.append)
+        assert notes == ["LSL: waiting up to 30 s for a consumer of footnav foot navigation, footnav gait events"]
+    finally:
+        for inlet in inlets:
+            inlet.close_stream()
+        lsl.close()
+
+
+def test_a_ctrl_c_during_the_demos_wait_ends_the_session(pylsl: Any, tmp_path: Path) -> None:
+    """The whole command in a process of its own, interrupted by a real SIGINT while it waits for consumers."""
+    cmd = [sys.executable, "-m", "footnav.app.cli", "demo", "--duration", "5", "--no-viewer"]
+    cmd += ["--sessions", str(tmp_path), "--lsl", "--lsl-wait", "120"]
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, env=dict(os.environ), cwd=tmp_path)
+    assert proc.stderr is not None
+    lines = []
+    for line in proc.stderr:
+        lines.append(line)
+        if "LSL: waiting up to 120 s" in line:
+            break
+    else:
+        pytest.fail(f"the demo never waited: {''.join(lines)}")
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    out = proc.communicate(timeout=60)[1]  # it would run 120 s + the walk without the interrupt
+    assert time.monotonic() - sent < 60
+    assert proc.returncode == 130
+    assert "LSL: samples streamed: foot 0; gait events: 0" in out  # the outlets were closed
+
+
+def test_a_smoothed_replay_streams_the_smoothed_track(pylsl: Any, shared_data: Path) -> None:
+    path = shared_data / "xio-gait-tracking" / "short_walk.csv"
+    opts = RecordingReplayOptions(path=path, viewer=False, smooth="whole", lsl=LslRequest(wait_s=WAIT_S))
+    rec = load_other_recording(path, None, None)
+    sid = f"footnav:replay:{rec.name}:foot"
+    code, got = stream_session(pylsl, lambda: run_recording_replay(opts), [sid, f"footnav:replay:{rec.name}:events"])
+    assert code == 0
+    smoothed, _ = navigate_recording(rec, None, "whole", True)
+    causal, _ = navigate_recording(rec, None, None, True)
+    assert float(np.max(np.abs(smoothed.pos_n_m - causal.pos_n_m))) > 0.01  # the two tracks differ
+    assert_state_equals(got[sid], smoothed, repeated_times=True)
+
+
+def test_the_lsl_identity_of_a_unit(pylsl: Any, capsys: pytest.CaptureFixture[str]) -> None:
+    identity = {text: lsl_identity(UnitAddress.parse(text)) for text in ("/dev/ttyACM0", "COM3", "ble:Oblu-7", "ble:")}
+    assert identity == {
+        "/dev/ttyACM0": "/dev/ttyACM0",
+        "COM3": "COM3",
+        "ble:Oblu-7": "ble:Oblu-7",
+        "ble:": BLE_FIRST_FOUND,
+    }
+    assert lsl_identity(UnitAddress.parse("ble")) == BLE_FIRST_FOUND
+    assert lsl_identity(UnitAddress.parse("ble:AA:BB:CC:DD:EE:FF")) == "ble:AA:BB:CC:DD:EE:FF"
+    assert source_id(lsl_identity(UnitAddress.parse("ble:")), "foot") == "footnav:ble:first-found:foot"
+    streams = lsl_feet(
+        LslRequest(), {"left": "ble:Oblu-7", "right": BLE_FIRST_FOUND}, units="u", rates={"left": 1.0, "right": 1.0}
+    )
+    check_lsl(streams)
+    assert "ble:NAME or ble:ADDRESS" in capsys.readouterr().err  # said, not silently an id for any unit
+    assert streams is not None
+    check_lsl(streams[:1])
+    assert capsys.readouterr().err == ""

@@ -24,8 +24,10 @@ foot's first sample, and kept for the session: intervals between time stamps are
 first sample is stamped with the time it reached the outlet (latency included). Each foot has its own
 offset (two units, two clocks). A replay maps the same way and runs at its own pace, so at ``--speed
 max`` the time stamps run ahead of ``local_clock()``. ``source_id`` is ``footnav:<identity>:<foot>``,
-the identity being the unit's port or BLE name (``emulator`` in the demo, ``replay:...`` in a replay):
-the same unit on the same port keeps its id, so LabRecorder picks a stream up again.
+the identity being the unit's port or ``ble:NAME|ADDRESS`` as given (``footnav.app.feet.lsl_identity``;
+``emulator`` in the demo, ``replay:...`` in a replay): the same unit on the same port keeps its id, so
+LabRecorder picks a stream up again. The outlets exist before the unit is found, and an id cannot change,
+so ``ble:`` alone (the first unit found) gets ``ble:first-found``, whichever unit answers.
 
 pylsl is imported by :func:`open_lsl` only, when ``--lsl`` is given; pushing never blocks (liblsl
 queues up to ``max_buffered_s`` of data per consumer and sends it from its own threads).
@@ -33,9 +35,11 @@ queues up to ``max_buffered_s`` of data per consumer and sends it from its own t
 
 from __future__ import annotations
 
+import asyncio
+import math
 import os
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -80,6 +84,8 @@ CHUNK_SAMPLES = 1024
 """A batch is pushed in chunks of at most this many samples (a recording's replay is one batch)."""
 MAX_BUFFERED_S = 360
 """liblsl's default: how much data an outlet keeps for a consumer that lags, s."""
+WAIT_SLICE_S = 0.2
+"""``--lsl-wait`` waits in slices of at most this long, s: Ctrl-C (checked between slices) acts within one."""
 CLOSE_LINGER_S = 1.0
 """On close, with consumers connected, the time given to liblsl to send what is queued, s."""
 INSTALL_HINT = "pip install 'footnav[lsl]'"
@@ -107,6 +113,10 @@ class LslRequest:
 
     wait_s: float = 0.0
     identity: str | None = None
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.wait_s) and self.wait_s >= 0):
+            raise ValueError(f"LslRequest.wait_s must be a finite time >= 0, s; got {self.wait_s}")
 
 
 @dataclass(frozen=True)
@@ -282,18 +292,57 @@ class LslOutlets:
 
         return put
 
-    def wait_for_consumers(self, timeout_s: float, *, notice: Callable[[str], None]) -> bool:
-        """Wait up to ``timeout_s`` until every stream has a consumer; False (and a notice) if some have none."""
+    def _outlets(self) -> dict[str, Any]:
+        """Stream name -> outlet, every stream of the session."""
         outlets = {f"footnav {foot} navigation": o for foot, o in self.state.items()}
-        outlets["footnav gait events"] = self.events
-        notice(f"LSL: waiting up to {timeout_s:g} s for a consumer of {', '.join(outlets)}")
+        if self.events is not None:
+            outlets["footnav gait events"] = self.events
+        return outlets
+
+    def missing_consumers(self) -> list[str]:
+        """The names of the streams that have no consumer now."""
+        return [name for name, o in self._outlets().items() if not o.have_consumers()]
+
+    def _slices(self, timeout_s: float, slice_s: float, notice: Callable[[str], None]) -> Iterator[tuple[Any, float]]:
+        """The waits of :meth:`wait_for_consumers`: (an outlet that has no consumer, how long to wait for it, s),
+        each at most ``slice_s``, until every stream has a consumer or ``timeout_s`` has passed.
+
+        Raises
+        ------
+        ValueError
+            ``timeout_s`` is not a finite time >= 0.
+        """
+        if not (math.isfinite(timeout_s) and timeout_s >= 0):
+            raise ValueError(f"the wait for LSL consumers must be a finite time >= 0, s; got {timeout_s}")
+        notice(f"LSL: waiting up to {timeout_s:g} s for a consumer of {', '.join(self._outlets())}")
         deadline = time.monotonic() + timeout_s
-        for outlet in outlets.values():
-            outlet.wait_for_consumers(max(0.0, deadline - time.monotonic()))
-        missing = [name for name, o in outlets.items() if not o.have_consumers()]
+        while (missing := self.missing_consumers()) and (left := deadline - time.monotonic()) > 0:
+            yield self._outlets()[missing[0]], min(slice_s, left)
+
+    def _told(self, timeout_s: float, notice: Callable[[str], None]) -> bool:
+        missing = self.missing_consumers()
         if missing:
             notice(f"LSL: no consumer of {', '.join(missing)} after {timeout_s:g} s; streaming anyway")
         return not missing
+
+    def wait_for_consumers(
+        self, timeout_s: float, *, notice: Callable[[str], None], slice_s: float = WAIT_SLICE_S
+    ) -> bool:
+        """Wait up to ``timeout_s`` (finite, s) until every stream has a consumer; False (and a notice) if some
+        have none. liblsl's wait is a C call that Ctrl-C cannot break into, so it is made in slices of at
+        most ``slice_s``: a KeyboardInterrupt arrives within one slice."""
+        for outlet, wait_s in self._slices(timeout_s, slice_s, notice):
+            outlet.wait_for_consumers(wait_s)  # returns as soon as a consumer connects
+        return self._told(timeout_s, notice)
+
+    async def wait_for_consumers_async(
+        self, timeout_s: float, *, notice: Callable[[str], None], slice_s: float = WAIT_SLICE_S
+    ) -> bool:
+        """:meth:`wait_for_consumers` on the event loop: it polls every ``slice_s`` without blocking the loop,
+        and a cancelled task (Ctrl-C in ``asyncio.run``) stops at once, leaving no thread behind."""
+        for _, wait_s in self._slices(timeout_s, slice_s, notice):
+            await asyncio.sleep(wait_s)
+        return self._told(timeout_s, notice)
 
     def close(self) -> None:
         """Destroy the outlets (consumers see the streams end), after giving queued data time to go out;

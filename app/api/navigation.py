@@ -29,7 +29,7 @@ from footnav.app.commands.export import (
     write_track_parquet,
 )
 from footnav.device.files.recordings import Recording, _nominal_rate
-from footnav.pipeline.errors import FootnavError
+from footnav.pipeline.errors import FootnavError, MissingExtraError
 from footnav.pipeline.gait import parameters
 from footnav.pipeline.gait.parameters import StrideParameters
 from footnav.pipeline.nav_types import NavBatch
@@ -336,11 +336,11 @@ def gait_parameters(result: Navigation | NavBatch) -> StrideParameters:
 
 
 def _pandas() -> ModuleType:
-    """The pandas module, or an ImportError that names the extra."""
+    """The pandas module, or a :class:`MissingExtraError` (an ImportError) that names the extra."""
     try:
         import pandas
     except ImportError:
-        raise ImportError(
+        raise MissingExtraError(
             "to_pandas() needs pandas, an optional extra of footnav: pip install 'footnav[pandas]'"
         ) from None
     return pandas

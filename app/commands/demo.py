@@ -32,6 +32,7 @@ from footnav.app.feet import (
     FootRun,
     attach_unit,
     calibration_lookup,
+    check_lsl,
     close_lsl_outlets,
     dual_view_sink,
     finish_capture,
@@ -348,7 +349,7 @@ def _shoe_demo(opts: DemoOptions) -> int:
         units=f"footnav emulator ({opts.grade})",
         rates=dict.fromkeys(feet, truth.rate_hz),
     )
-    lsl = open_lsl_outlets(lsl_streams, wait_s=opts.lsl.wait_s if opts.lsl else 0.0)
+    check_lsl(lsl_streams)  # pylsl missing: stop before the viewer and the capture start
     heap.limit_arenas()  # before the viewer's and the capture's threads start
     views, notes = open_session_views(
         save=opts.save,
@@ -384,7 +385,7 @@ def _shoe_demo(opts: DemoOptions) -> int:
     # (as a replay does) rather than dropping samples from the recording.
     put_timeout_s = 0.0 if opts.realtime == 1.0 else DEMO_PUT_TIMEOUT_S
     for run in runs:
-        foot_sinks(run, views, status, two_feet=two, put_timeout_s=put_timeout_s, lsl=lsl)
+        foot_sinks(run, views, status, two_feet=two, put_timeout_s=put_timeout_s)
         if opts.collect is not None:
             run.sinks.append(opts.collect(run.foot))
         if views is not None and isinstance(run.navigator, DualNavigator):
@@ -424,7 +425,9 @@ def _shoe_demo(opts: DemoOptions) -> int:
         )
 
     interrupted = False
+    lsl = None
     try:
+        lsl = open_lsl_outlets(lsl_streams, runs, wait_s=opts.lsl.wait_s if opts.lsl else 0.0)
         with contextlib.ExitStack() as stack:
             for server in servers:
                 stack.enter_context(server)

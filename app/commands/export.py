@@ -20,7 +20,7 @@ from footnav.app.status import input_handling
 from footnav.device.files.capture import MCAP_MAGIC
 from footnav.device.files.recordings import CsvMapping, Recording, load_recording
 from footnav.device.files.table_csv import write_table_csv
-from footnav.device.files.table_parquet import write_table_parquet
+from footnav.device.files.table_parquet import require_pyarrow, write_table_parquet
 from footnav.pipeline.aiding.tof_types import TofConfig
 from footnav.pipeline.errors import FootnavError, InputFormatError
 from footnav.pipeline.gait.steps import segment_steps
@@ -160,7 +160,7 @@ def write_track_parquet(nav: NavBatch, path: Path) -> None:
 
     Raises
     ------
-    ImportError
+    MissingExtraError
         pyarrow is not installed (``pip install 'footnav[parquet]'``).
     """
     names, table = track_table(nav)
@@ -182,15 +182,17 @@ def track_format(path: Path, out_format: str | None = None) -> str:
     Raises
     ------
     FootnavError
-        ``path``'s suffix names the other format.
+        ``path``'s suffix names the other format, or Parquet is asked for without pyarrow installed.
     """
     by_name = "parquet" if path.suffix.lower() == ".parquet" else "csv"
     if out_format is None:
-        return by_name
-    if out_format not in TRACK_FORMATS:
+        out_format = by_name
+    elif out_format not in TRACK_FORMATS:
         raise ValueError(f"out_format must be one of {tuple(TRACK_FORMATS)} or None, got {out_format!r}")
-    if path.suffix.lower() in TRACK_FORMATS.values() and by_name != out_format:
+    elif path.suffix.lower() in TRACK_FORMATS.values() and by_name != out_format:
         raise FootnavError(f"{path} is named {path.suffix} but --output-format is {out_format}; name it alike")
+    if out_format == "parquet":
+        require_pyarrow()  # before any work
     return out_format
 
 
@@ -382,7 +384,10 @@ def export_files(
         raise FootnavError("no recordings found in " + ", ".join(str(p) for p in paths))
     if out_dir.exists() and not out_dir.is_dir():
         raise FootnavError(f"{out_dir} is a file; with a folder or several recordings, -o names a folder")
-    suffix = TRACK_FORMATS[str(options.get("out_format") or "csv")]
+    out_format = str(options.get("out_format") or "csv")
+    if out_format == "parquet":
+        require_pyarrow()  # once, before any file is navigated
+    suffix = TRACK_FORMATS[out_format]
     dests = export_destinations(paths, files, out_dir, suffix)
     job = ExportJob(dict(zip(files, dests, strict=True)), **options)  # type: ignore[arg-type]
     return run_files(job, files, jobs, "export", client=client)

@@ -29,6 +29,7 @@ from footnav.app.feet import (
     FootRun,
     attach_unit,
     calibration_lookup,
+    check_lsl,
     close_lsl_outlets,
     dual_view_sink,
     finish_capture,
@@ -36,6 +37,7 @@ from footnav.app.feet import (
     foot_sinks,
     link_reporter,
     link_summary,
+    lsl_identity,
     new_session_id,
     notice,
     open_capture,
@@ -43,6 +45,7 @@ from footnav.app.feet import (
     rate_reporter,
     run_feet,
     unit_header,
+    wait_lsl_consumers_async,
 )
 from footnav.app.session import UnitAddress, run_device_session, unit_mode
 from footnav.app.status import StatusLine
@@ -230,11 +233,11 @@ async def live_session(opts: LiveOptions) -> int:
     onboard = output if output in ONBOARD_TITLES else None
     lsl_streams = lsl_feet(
         opts.lsl,
-        {foot: str(address) for foot, address in addresses.items()},
+        {foot: lsl_identity(address) for foot, address in addresses.items()},
         units=model.title,
         rates={foot: 0.0 if onboard == "steps" else model.rate_hz(k) for foot, k in dividers.items()},
     )
-    lsl = await asyncio.to_thread(open_lsl_outlets, lsl_streams, wait_s=opts.lsl.wait_s if opts.lsl else 0.0)
+    check_lsl(lsl_streams)  # pylsl missing: stop before the viewer and the capture start
     heap.limit_arenas()  # before the viewer's and the capture's threads start
     views, notes = open_session_views(
         save=opts.save,
@@ -268,7 +271,7 @@ async def live_session(opts: LiveOptions) -> int:
         for foot in feet
     ]
     for run in runs:
-        foot_sinks(run, views, status, two_feet=two_feet, lsl=lsl)
+        foot_sinks(run, views, status, two_feet=two_feet)
         if views is not None and isinstance(run.navigator, DualNavigator):
             run.sinks.append(dual_view_sink(run.navigator, views, run.foot))
         if opts.collect is not None:
@@ -317,7 +320,10 @@ async def live_session(opts: LiveOptions) -> int:
 
     if views is not None:
         views.log_event(f"live session {session_id}: " + ", ".join(_foot_line(run, addresses, model) for run in runs))
+    lsl = None
     try:
+        lsl = open_lsl_outlets(lsl_streams, runs)
+        await wait_lsl_consumers_async(lsl, opts.lsl.wait_s if opts.lsl else 0.0)
         await run_feet(runs, session)
     finally:
         status.finish()

@@ -27,6 +27,7 @@ from footnav.app.feet import (
     ONBOARD_INS_STATES,
     ONBOARD_TITLES,
     FootRun,
+    check_lsl,
     close_lsl_outlets,
     dual_view_sink,
     foot_run,
@@ -34,6 +35,7 @@ from footnav.app.feet import (
     notice,
     open_lsl_outlets,
     rate_reporter,
+    run_feet,
 )
 from footnav.app.session import CalibrationLookup, run_unit_session, unit_mode
 from footnav.app.status import Progress, StatusLine, input_handling
@@ -269,7 +271,7 @@ def run_replay(opts: ReplayOptions) -> int:
         units={u.foot: u.unit for u in info.units},
         rates={foot: 0.0 if onboard_of.get(foot) == "steps" else rate_of.get(foot, 1000.0) for foot in feet},
     )
-    lsl = open_lsl_outlets(lsl_streams, wait_s=opts.lsl.wait_s if opts.lsl else 0.0)
+    check_lsl(lsl_streams)  # pylsl missing: stop before the viewer starts
     views, notes = open_session_views(
         save=opts.save,
         want_viewer=opts.viewer,
@@ -309,7 +311,6 @@ def run_replay(opts: ReplayOptions) -> int:
             status,
             two_feet=len(feet) > 1,
             put_timeout_s=0.0 if realtime else REPLAY_PUT_TIMEOUT_S,
-            lsl=lsl,
         )
         if views is not None and isinstance(navigator, DualNavigator):
             run.sinks.append(dual_view_sink(navigator, views, foot))
@@ -361,10 +362,10 @@ def run_replay(opts: ReplayOptions) -> int:
             on_rate=rate_reporter(run, views, two_feet=len(feet) > 1),
         )
 
-    from footnav.app.feet import run_feet
-
     interrupted = False
+    lsl = None
     try:
+        lsl = open_lsl_outlets(lsl_streams, runs, wait_s=opts.lsl.wait_s if opts.lsl else 0.0)
         asyncio.run(run_feet(runs, session))
     except KeyboardInterrupt:
         interrupted = True

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 from footnav.app.commands.export import lead_in_note, load_other_recording, navigate_recording
-from footnav.app.feet import close_lsl_outlets, notice, open_lsl_outlets
+from footnav.app.feet import check_lsl, close_lsl_outlets, notice, open_lsl_outlets
 from footnav.app.status import input_handling
 from footnav.device.files.recordings import Recording
 from footnav.pipeline.gait.events import GaitEventTracker
@@ -50,7 +50,7 @@ class RecordingReplayOptions:
         None (causal), ``whole`` or ``step`` (``footnav.app.commands.export.SMOOTHING``).
     lsl
         ``--lsl``: the estimates on Lab Streaming Layer too (:mod:`footnav.views.lsl`), all at once
-        once navigated, as from a unit ``replay:<recording name>``.
+        once navigated, as from a unit ``replay:<recording name>``; with ``smooth``, the smoothed track.
     """
 
     path: Path
@@ -100,13 +100,10 @@ def run_recording_replay(opts: RecordingReplayOptions) -> int:
     )
     nav, stats = navigate_recording(rec, opts.profile, opts.smooth, opts.stance_levels)
     shown = GaitEventTracker().annotate(nav if opts.smooth is None else beside_causal(rec, nav, opts))
-    lsl = open_lsl_outlets(
-        lsl_feet(
-            opts.lsl, {"foot": f"replay:{rec.name}"}, units=f"{rec.format} recording", rates={"foot": rec.rate_hz}
-        ),
-        wait_s=opts.lsl.wait_s if opts.lsl else 0.0,
-        max_buffered_s=math.ceil(len(nav) / rec.rate_hz) + 60,  # all of it is pushed at once
+    lsl_streams = lsl_feet(
+        opts.lsl, {"foot": f"replay:{rec.name}"}, units=f"{rec.format} recording", rates={"foot": rec.rate_hz}
     )
+    check_lsl(lsl_streams)  # pylsl missing: stop before the viewer starts
     views, notes = open_session_views(
         save=opts.save,
         want_viewer=opts.viewer,
@@ -121,8 +118,16 @@ def run_recording_replay(opts: RecordingReplayOptions) -> int:
         _show(views, rec, shown, stats.samples_before_alignment - stats.samples_navigated_backwards)
         for note in views.close():
             notice(note)
-    if lsl is not None:
-        lsl.put(shown, foot="foot")
+    lsl = None
+    try:
+        lsl = open_lsl_outlets(
+            lsl_streams,
+            wait_s=opts.lsl.wait_s if opts.lsl else 0.0,
+            max_buffered_s=math.ceil(len(nav) / rec.rate_hz) + 60,  # all of it is pushed at once
+        )
+        if lsl is not None:  # the track asked for: with smooth, the smoothed one (not the causal one drawn beside it)
+            lsl.put(shown if opts.smooth is None else GaitEventTracker().annotate(nav), foot="foot")
+    finally:
         close_lsl_outlets(lsl)
     handled = f"; {h}" if (h := input_handling(stats)) else ""
     print(

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
@@ -293,12 +294,23 @@ def format_table(rows: list[TableRow], seeds: list[int], axes: str = "none", rat
     lines.append("")
     lines += [f"{m:<9} {LABELS[m]}" for m in METHODS]
     lines.append(
-        "same record and same stance samples for all (SHOE detector, adaptive threshold, on IMU 1); "
+        "same record and same stance samples (SHOE detector, adaptive threshold, on IMU 1) for all but paper-3c "
+        "(its own detector) and foot2foot (its own two-feet walk); "
         f"IMUs: {DEFAULT_GRADE} grade at {rate_hz:g} Hz, axis errors {axes!r}, independent errors; "
         f"lever arm {DEFAULT_LEVER_B_M} m; "
         f"filter profile {PROFILE!r}"
     )
     return "\n".join(lines)
+
+
+def _rate_hz(text: str) -> float:
+    try:
+        rate = float(text)
+    except ValueError:
+        rate = math.nan
+    if not 10.0 <= rate <= 10_000.0:
+        raise argparse.ArgumentTypeError(f"expected a sample rate of 10 to 10000 Hz, got {text!r}")
+    return rate
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -316,7 +328,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--rate",
-        type=float,
+        type=_rate_hz,
         default=1000.0,
         metavar="HZ",
         help="the emulated IMUs' sample rate (default 1000; the paper: 100)",

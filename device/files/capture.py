@@ -230,9 +230,9 @@ class CaptureWriter:
         ValueError
             a unit of this foot name was declared already (its bytes would merge into one stream).
         """
-        if any(foot == header.foot for foot, _ in self._channels):
-            raise ValueError(f"two units named {header.foot!r} in one capture: each unit needs its own foot name")
         with self._lock:
+            if any(foot == header.foot for foot, _ in self._channels):
+                raise ValueError(f"two units named {header.foot!r} in one capture: each unit needs its own foot name")
             self._writer.add_metadata("footnav.unit", sealed("footnav.unit", header.to_metadata()))
             for direction in ("rx", "tx"):
                 self._channels[(header.foot, direction)] = self._writer.register_channel(

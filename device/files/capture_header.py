@@ -11,7 +11,7 @@ accidental damage.
 
 :func:`verify` checks a record read from a file. On a mismatch it looks for the one bit whose flip
 restores the checksum (every bit of the body tried, about 20 000 CRCs of 2.5 kB for a unit record,
-~50 ms, only for a damaged record); where there is one, the damaged field is named down to the key
+~100 ms, only for a damaged record); where there is one, the damaged field is named down to the key
 of the settings JSON that holds the bit (``settings.nav_config.detector.threshold``), and the
 other fields, whose bytes are intact, are read as recorded. :func:`apply_policy` then decides per
 field: a value the replay can do without or recover is replaced by its default with a warning

@@ -149,6 +149,7 @@ def load_pyshoe_mat(path: Path) -> Recording:
         name=path.stem,
         format="pyshoe",
         t_s=t - t[0],
+        t_start_s=float(t[0]),
         acc_b_mps2=imu[:, :3].copy(),
         gyr_b_radps=imu[:, 3:].copy(),
         rate_hz=rate_hz,
@@ -213,6 +214,7 @@ def load_xio_csv(path: Path) -> Recording:
         name=path.stem,
         format="xio",
         t_s=t - t[0],
+        t_start_s=float(t[0]),
         acc_b_mps2=data[:, 4:7] * G0_MPS2,
         gyr_b_radps=data[:, 1:4] * DEG,
         rate_hz=rate_hz,
@@ -254,6 +256,7 @@ def load_openshoe_txt(path: Path) -> Recording:
         name=path.stem,
         format="openshoe",
         t_s=t - t[0],
+        t_start_s=float(t[0]),
         acc_b_mps2=data[:, 0:3] * G0_MPS2,
         gyr_b_radps=data[:, 3:6].copy(),
         rate_hz=rate_hz,
@@ -365,13 +368,13 @@ def load_generic_csv(path: Path, mapping: CsvMapping | None = None) -> Recording
         name=path.stem,
         format="csv",
         t_s=t - t[0],
+        t_start_s=float(t[0]),
         acc_b_mps2=data[:, 1:4] * ACC_UNITS[m.acc_unit],
         gyr_b_radps=data[:, 4:7] * GYR_UNITS[m.gyr_unit],
         rate_hz=rate_hz,
         profile=m.profile,
         gt_pos_m=data[:, 7:10].copy() if with_gt else None,
         closed_loop=m.closed_loop,
-        t_start_s=float(t[0]),
     )
 
 

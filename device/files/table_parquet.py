@@ -12,12 +12,27 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
-from footnav.pipeline.errors import FootnavError
+from footnav.pipeline.errors import FootnavError, MissingExtraError
 from numpy.typing import NDArray
 
 PARQUET_EXTRA = "pip install 'footnav[parquet]'"
+
+
+def require_pyarrow() -> tuple[ModuleType, ModuleType]:
+    """``pyarrow`` and ``pyarrow.parquet``, or a :class:`MissingExtraError` naming the extra."""
+    try:
+        import pyarrow
+        import pyarrow.parquet
+    except ImportError:
+        raise MissingExtraError(
+            f"writing Parquet needs pyarrow, an optional extra of footnav: {PARQUET_EXTRA}"
+        ) from None
+    return pyarrow, pyarrow.parquet
+
+
 COMPRESSION = "zstd"
 
 
@@ -49,16 +64,12 @@ def write_table_parquet(
 
     Raises
     ------
-    ImportError
-        pyarrow is not installed (the message names the extra).
+    MissingExtraError
+        pyarrow is not installed (the message names the extra; also an ImportError).
     FootnavError
         the file cannot be written.
     """
-    try:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-    except ImportError:
-        raise ImportError(f"writing Parquet needs pyarrow, an optional extra of footnav: {PARQUET_EXTRA}") from None
+    pa, pq = require_pyarrow()
     units = units or {}
     fields, arrays = [], []
     for i, name in enumerate(header):

@@ -13,7 +13,7 @@ conditions and thresholds Chen et al. combine):
 then C1 ∧ C2 ∧ C3 is smoothed by a median filter over ``median_s`` (11 samples at 100 Hz). Moving
 sums make it O(n) in time and memory. Unlike
 footnav's streaming detectors (``footnav.pipeline.stance.detectors``) the windows are centred: this is a
-whole-record detector, for comparing stance decisions offline (``footnav experiment dual-imu --detector``).
+whole-record detector, for comparing stance decisions offline (``footnav experiment dual-imu``, ``paper-3c``).
 Windows are cut at the record's ends.
 """
 
