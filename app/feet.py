@@ -312,7 +312,7 @@ def foot_sinks(
     run.sinks = [status.foot(run.foot)]
     run.views = views
     if views is not None:
-        display = views.sink(run.foot, timeout_s=put_timeout_s)
+        display: NavSink = views.sink(run.foot, timeout_s=put_timeout_s)
         if two_feet:
             display = offset_sink(display, FOOT_START_OFFSET_M[run.foot])
         run.health = LinkHealth(views.log_link, run.foot, clock_rate_hz=lambda: run.result.clock_rate_hz)

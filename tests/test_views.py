@@ -380,3 +380,78 @@ def test_step_onsets_floor_ellipses_and_heading() -> None:
     yaw = np.deg2rad([0.0, 90.0, -135.0])
     q_wxyz = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], axis=1)
     np.testing.assert_allclose(convert.heading_deg(q_wxyz), [0.0, 90.0, -135.0], atol=1e-12)
+
+
+# ---------------------------------------------------------------- the viewer's private folder
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="a bogus DISPLAY only stops the viewer on Linux")
+def test_a_viewer_that_fails_to_start_leaves_no_private_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The real viewer binary cannot open a window on a display that does not exist: whether it was
+    started by a session or alone, its private folder is gone once the start failed."""
+    import tempfile
+
+    from footnav.views.outputs import open_session_views
+    from footnav.views.sinks import ViewerStartError, spawn_viewer
+
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))  # where private_folder() makes its folders
+    env = {**os.environ, "DISPLAY": ":987", "WAYLAND_DISPLAY": ""}
+    views, notes = open_session_views(
+        save=tmp_path / "f.rrd", want_viewer=True, recording_id="no-window", notice=print, environ=env
+    )
+    assert views is not None and [o.kind for o in views.outputs] == ["recording file"]
+    assert any("viewer not started" in n for n in notes), notes
+    assert list(temp.iterdir()) == []
+    assert views.close() == []
+    with pytest.raises(ViewerStartError):
+        spawn_viewer(env=env)  # a folder of its own
+    assert list(temp.iterdir()) == []
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="the /bin/sh wrapper; the viewer found in /proc")
+def test_a_viewer_open_at_the_session_end_removes_its_folder_when_it_exits(tmp_path: Path) -> None:
+    """A Rerun viewer process (the real binary, serving its web viewer: it runs without a display)
+    started through ``remove_folder_after`` as ``spawn_viewer`` starts it: the session's end leaves its
+    folder while it runs; when the viewer alone exits (as when its window is closed), the folder goes."""
+    import subprocess
+
+    from footnav.views.outputs import Output, SessionViews
+    from footnav.views.rerun_env import private_folder, remove_folder_after, rerun_environment
+    from footnav.views.sinks import LOOPBACK, _free_loopback_port, _port_open, viewer_binary
+
+    folder = private_folder()
+    grpc_port, web_port = _free_loopback_port(), _free_loopback_port()
+    cmd = [str(viewer_binary()), "--serve-web", "--bind", LOOPBACK, "--port", str(grpc_port),
+           "--web-viewer-port", str(web_port)]  # fmt: skip
+    proc = subprocess.Popen(
+        remove_folder_after(cmd, folder),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+        env=rerun_environment(folder),
+    )
+    try:
+        deadline = time.monotonic() + 15.0
+        while not _port_open(grpc_port) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert _port_open(grpc_port) and proc.poll() is None
+        url = f"rerun+http://{LOOPBACK}:{grpc_port}/proxy"
+        logger = RerunLogger([rr.GrpcSink(url)], recording_id="folder-test")
+        views = SessionViews([Output("viewer", f"pid {proc.pid}", logger, proc, folder=folder)], notice=print)
+        views.put(synth_walk(500, np.random.default_rng(3)))
+        assert views.close() == []
+        assert proc.poll() is None and (folder / "config" / "rerun" / "analytics.json").is_file()  # left to it
+        (viewer_pid,) = (int(p) for p in Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split())
+        os.kill(viewer_pid, 15)  # the viewer alone, not its wrapper
+        assert proc.wait(15) == 128 + 15  # the wrapper exits with the viewer's code
+        assert not folder.exists()
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, 9)
+            proc.wait(5)
+        if folder.exists():
+            import shutil
+
+            shutil.rmtree(folder)

@@ -8,8 +8,10 @@ session and its capture carry on. The outputs merge into one recording wherever 
 
 A recording file that cannot be written (a full disk) is known within its flush period (the file's
 logger waits for each flush to be written), said in one line, cut back to its last whole message so
-Rerun's readers read it, and listed in :data:`INCOMPLETE_RECORDINGS` (the command's exit code is then
-:data:`EXIT_RECORDING_INCOMPLETE`). The web viewer's server stops with the session unless kept.
+Rerun's readers read it (at the session's end, once its logger is closed), and listed in
+:data:`INCOMPLETE_RECORDINGS` (the command's exit code is then :data:`EXIT_RECORDING_INCOMPLETE`).
+The web viewer's server stops with the session unless kept; a native viewer still open then removes
+its private folder when it exits.
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ from footnav.views.sinks import (
     spawn_viewer,
     stop_process,
     trim_rrd,
+    whole_rrd_bytes,
 )
 from numpy.typing import NDArray
 
@@ -72,9 +75,14 @@ class Output:
     path
         the .rrd file, for ``file`` outputs.
     folder
-        the private folder of the process (:mod:`footnav.views.rerun_env`), removed once it ended.
+        the private folder of the process (:mod:`footnav.views.rerun_env`), removed once it ended (a
+        native viewer still open at the session's end removes it itself when it exits).
     keep
         leave the process running when the session ends (a web viewer's server, when asked).
+    incomplete
+        the ``.rrd`` file could not be written to the end; it is cut back when the session closes.
+    closing
+        the thread closing the logger of an output dropped during the session.
     """
 
     kind: str
@@ -85,6 +93,8 @@ class Output:
     alive: bool = True
     folder: Path | None = None
     keep: bool = False
+    incomplete: bool = False
+    closing: threading.Thread | None = None
 
 
 class SessionViews:
@@ -121,7 +131,7 @@ class SessionViews:
             if out.process is not None and (code := out.process.poll()) is not None:
                 reason = f"the Rerun {out.kind} ({out.description}) exited (code {code})"
             elif out.logger.stats.error is not None and out.path is not None:
-                reason = _file_failed(out.path, out.logger.stats.error)
+                reason = _file_failed(out, out.logger.stats.error)
             elif out.logger.stats.error is not None:
                 reason = f"the Rerun {out.kind} output ({out.description}) failed: {out.logger.stats.error}"
             if reason is None:
@@ -133,9 +143,10 @@ class SessionViews:
                 carry += " and still record to " + ", ".join(others)
             self._notice(f"{reason}; {carry}")
             # its thread may be stuck in a gRPC send: close it in the background, never wait here
-            threading.Thread(
+            out.closing = threading.Thread(
                 target=out.logger.close, args=(DEAD_LOGGER_CLOSE_S,), name="footnav-drop-output", daemon=True
-            ).start()
+            )
+            out.closing.start()
 
     def _maybe_check(self) -> None:
         if time.monotonic() >= self._next_check:
@@ -182,18 +193,21 @@ class SessionViews:
             out.logger.log_link(**health)
 
     def close(self) -> list[str]:
-        """Close every live output (file footers written), stop the web viewer's server unless it is
-        kept, remove the private folders of processes that ended; returns notes on what did not close
-        cleanly or was kept running."""
+        """Close every live output (file footers written), cut the recording files that could not be
+        written back to their last whole message once their loggers are closed, stop the web viewer's
+        server unless it is kept, remove the private folders of processes that ended; returns notes on
+        what did not close cleanly or was kept running."""
         self.check_outputs()
         notes = []
         for out in self.outputs:
             if out.alive and not out.logger.close():
                 notes.append(f"the Rerun {out.kind} ({out.description}) did not finish in time")
             elif out.alive and out.logger.stats.error is not None and out.path is not None:
-                notes.append(_file_failed(out.path, out.logger.stats.error))
+                notes.append(_file_failed(out, out.logger.stats.error))
             elif out.alive and out.logger.stats.error is not None:
                 notes.append(f"the Rerun {out.kind} ({out.description}) failed: {out.logger.stats.error}")
+            if out.incomplete and out.path is not None and not _trim_closed(out):
+                notes.append(f"the recording file {out.path} was still being written: not cut back")
             if out.process is not None and out.kind == "web viewer" and out.keep:
                 notes.append(
                     f"the web viewer keeps running (pid {out.process.pid}, {out.description}); "
@@ -209,12 +223,17 @@ class SessionViews:
         return max(o.logger.stats.samples_dropped for o in self.outputs)
 
 
-def _file_failed(path: Path, error: BaseException) -> str:
-    """One line on a recording file that could not be written: why, and what it keeps (the file is
-    cut back to its last whole message, :func:`~footnav.views.sinks.trim_rrd`)."""
+def _file_failed(out: Output, error: BaseException) -> str:
+    """One line on a recording file that could not be written: why, and what it keeps (its whole
+    messages, :func:`~footnav.views.sinks.whole_rrd_bytes`; the rest is cut off by :func:`_trim_closed`
+    when the session closes). The output is marked incomplete and its path listed in
+    :data:`INCOMPLETE_RECORDINGS`."""
+    assert out.path is not None
+    path = out.path
+    out.incomplete = True
     if path not in INCOMPLETE_RECORDINGS:
         INCOMPLETE_RECORDINGS.append(path)
-    kept = trim_rrd(path)
+    kept = whole_rrd_bytes(path)
     try:
         full = shutil.disk_usage(path.parent).free < FULL_DISK_BYTES
     except OSError:
@@ -225,6 +244,24 @@ def _file_failed(path: Path, error: BaseException) -> str:
 
 FULL_DISK_BYTES = 1 << 20
 """Less free space than this on a recording file's disk when its writing failed: the disk is full."""
+CLOSING_WAIT_S = DEAD_LOGGER_CLOSE_S + 5.0
+"""How long the session's end waits for a dropped output's logger to close, s."""
+
+
+def _trim_closed(out: Output) -> bool:
+    """Cut an incomplete recording file back to its last whole message
+    (:func:`~footnav.views.sinks.trim_rrd`) once nothing of footnav writes it: its logger closed and
+    its thread ended (the stream whose writer failed is parked, and its sink gets nothing more).
+    False, the file untouched, if the logger's thread is still running."""
+    assert out.path is not None
+    if out.closing is not None:
+        out.closing.join(CLOSING_WAIT_S)
+        if out.closing.is_alive():
+            return False
+    if not out.logger.close(0.0):  # closed already: only says whether its thread ended
+        return False
+    trim_rrd(out.path)
+    return True
 
 
 def check_save_destination(path: Path) -> None:
@@ -335,13 +372,15 @@ def open_session_views(
             notes.append(f"web viewer (127.0.0.1 only, pid {proc.pid}, {until}): open {page}")
     elif want_viewer:
         if has_display(environ):
-            try:  # the viewer outlives the session: its private folder stays with it
-                url, proc = spawn_viewer(env=environ)
+            folder = private_folder()  # the viewer may outlive the session: it removes the folder on exit
+            try:
+                url, proc = spawn_viewer(env=environ, folder=folder)
             except ViewerStartError as exc:
+                remove_private_folder(folder)
                 notes.append(f"viewer not started: {exc}")
                 fallback = True
             else:
-                outputs.append(Output("viewer", f"pid {proc.pid}", logger(rr.GrpcSink(url)), proc))
+                outputs.append(Output("viewer", f"pid {proc.pid}", logger(rr.GrpcSink(url)), proc, folder=folder))
                 notes.append(f"streaming to a Rerun viewer (pid {proc.pid}, {url})")
         else:
             notes.append("no display (neither DISPLAY nor WAYLAND_DISPLAY is set): no viewer (--web serves one)")

@@ -30,7 +30,7 @@ import json
 import os
 import shutil
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 DEAD_PROXY = "http://127.0.0.1:0"
@@ -51,6 +51,25 @@ def private_folder() -> Path:
 def remove_private_folder(folder: Path) -> None:
     """Remove a folder made by :func:`private_folder`, whatever it holds (errors ignored)."""
     shutil.rmtree(folder, ignore_errors=True)
+
+
+_REMOVE_AFTER = 'folder=$1; shift; "$@"; code=$?; rm -rf -- "$folder"; exit $code'
+"""A POSIX shell script: run the command given, then remove ``folder``, and exit with the command's
+code (128 + the signal's number if a signal ended it)."""
+
+
+def remove_folder_after(cmd: Sequence[str], folder: Path) -> list[str]:
+    """``cmd`` wrapped so that ``folder`` is removed when the command exits, whenever that is.
+
+    For a viewer that outlives footnav: ``/bin/sh`` runs it, waits for it and then removes its private
+    folder, so a viewer still open when the session ends takes its folder with it when it closes.
+    The wrapper's process is the viewer's parent (its pid is the process group's, if started in a
+    new session) and exits with the viewer's code. On Windows (no ``/bin/sh``) ``cmd`` is returned
+    unchanged and the folder is left to the system's temporary-folder cleaning.
+    """
+    if os.name != "posix":
+        return list(cmd)
+    return ["/bin/sh", "-c", _REMOVE_AFTER, "sh", str(folder), *cmd]
 
 
 def rerun_environment(folder: Path, base: Mapping[str, str] | None = None) -> dict[str, str]:

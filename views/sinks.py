@@ -5,13 +5,16 @@ Everything listens on 127.0.0.1 only: the viewer is started from the installed r
 ``rr.spawn``, which binds 0.0.0.0. Without a display (no ``DISPLAY``/``WAYLAND_DISPLAY``) no viewer
 is started — spawning one there stalls for ~11 s and loses data — and the session is saved instead.
 Every viewer runs in the environment of :mod:`footnav.views.rerun_env` (no analytics, no outbound
-connection, its files in a private folder). A recording file cut short (a full disk) is trimmed to
-its last whole message by :func:`trim_rrd`, so Rerun's readers read it.
+connection, its files in a private folder, removed when the native viewer exits). A recording file
+cut short (a full disk) is trimmed to its last whole message by :func:`trim_rrd`, so Rerun's readers
+read it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -22,7 +25,13 @@ from pathlib import Path
 
 import rerun as rr
 from footnav.pipeline.errors import FootnavError
-from footnav.views.rerun_env import VIEWER_FLAGS, private_folder, rerun_environment
+from footnav.views.rerun_env import (
+    VIEWER_FLAGS,
+    private_folder,
+    remove_folder_after,
+    remove_private_folder,
+    rerun_environment,
+)
 from rerun.sinks import LogSinkLike
 
 LOOPBACK = "127.0.0.1"
@@ -91,20 +100,25 @@ def spawn_viewer(
     The viewer runs in its own session so it outlives footnav (the user closes it). Its environment
     is ``env`` (default: inherited) made private by
     :func:`~footnav.views.rerun_env.rerun_environment` in ``folder`` (default: a new
-    :func:`~footnav.views.rerun_env.private_folder`, left for the viewer, which outlives footnav).
+    :func:`~footnav.views.rerun_env.private_folder`). The viewer is started through
+    :func:`~footnav.views.rerun_env.remove_folder_after`: ``folder`` goes when the viewer exits,
+    whenever that is (on POSIX); if the viewer fails to start, a folder made here is removed at once,
+    and one given is the caller's to remove.
 
     Returns
     -------
     url : str
         The ``rerun+http://127.0.0.1:PORT/proxy`` URL for ``rr.GrpcSink``.
     process : subprocess.Popen[bytes]
-        The viewer's process.
+        The viewer's process (on POSIX its ``/bin/sh`` wrapper, which exits with the viewer's code).
 
     Raises
     ------
     ViewerStartError
         the viewer exited or did not open its port in time.
     """
+    own = folder is None
+    folder = private_folder() if folder is None else folder
     port = _free_loopback_port()
     cmd = [
         str(viewer_binary()),
@@ -116,35 +130,62 @@ def spawn_viewer(
         *VIEWER_FLAGS,
     ]  # fmt: skip
     proc = subprocess.Popen(
-        cmd,
+        remove_folder_after(cmd, folder),
         stdin=subprocess.DEVNULL,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         start_new_session=True,
-        env=rerun_environment(folder or private_folder(), env),
+        env=rerun_environment(folder, env),
     )
+    try:
+        _wait_for_viewer(proc, port, timeout_s, cmd[0])
+    except ViewerStartError:
+        if own:
+            remove_private_folder(folder)
+        raise
+    return f"rerun+http://{LOOPBACK}:{port}/proxy", proc
+
+
+def _wait_for_viewer(proc: subprocess.Popen[bytes], port: int, timeout_s: float, exe: str) -> None:
+    """Return once the viewer ``proc`` listens on ``port`` and is still running :data:`VIEWER_GRACE_S`
+    later; raise :class:`ViewerStartError` (its process group ended) otherwise."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if proc.poll() is not None:
             raise ViewerStartError(
                 f"the Rerun viewer exited at start-up (code {proc.returncode}); "
-                f"try running `{cmd[0]}` yourself to see why, or use --save FILE.rrd"
+                f"try running `{exe}` yourself to see why, or use --save FILE.rrd"
             )
         if _port_open(port):
             try:
                 code = proc.wait(VIEWER_GRACE_S)
             except subprocess.TimeoutExpired:
-                return f"rerun+http://{LOOPBACK}:{port}/proxy", proc
+                return
             raise ViewerStartError(
                 f"the Rerun viewer exited right after start-up (code {code}); "
-                f"try running `{cmd[0]}` yourself to see why, or use --save FILE.rrd"
+                f"try running `{exe}` yourself to see why, or use --save FILE.rrd"
             )
         time.sleep(0.05)
-    proc.terminate()
+    _stop_group(proc)
     raise ViewerStartError(
         f"the Rerun viewer did not open port {port} within {timeout_s:.0f} s; "
         "use --save FILE.rrd and open the file later"
     )
+
+
+def _stop_group(proc: subprocess.Popen[bytes], timeout_s: float = 5.0) -> None:
+    """End a process started in a new session and everything in its group (a wrapper and its viewer)."""
+    if os.name == "posix":
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout_s)
+    else:
+        stop_process(proc, timeout_s)
 
 
 WEB_VIEWER_START_TIMEOUT_S = 15.0
@@ -240,25 +281,23 @@ RRD_MESSAGE_HEADER_BYTES = 16
 """Each message follows: its kind and its payload length, two little-endian u64, then the payload."""
 
 
-def trim_rrd(path: Path) -> int:
-    """Cut a recording file whose writing stopped mid-message back to its last whole message.
+def whole_rrd_bytes(path: Path) -> int:
+    """The length of a recording file up to the end of its last whole message; the file is not changed.
 
-    Rerun's file writer that fails (a full disk) leaves a partial message at the end, and
-    ``RrdReader(path).stream()`` refuses the whole file for it ("Message payload … exceeds file
-    size"); without it the file reads as one whose writer was stopped. The messages are walked by
-    their headers only (:data:`RRD_MESSAGE_HEADER_BYTES`); an end marker (kind 0: the footer follows)
-    ends the walk with the file untouched.
+    The messages are walked by their headers only (:data:`RRD_MESSAGE_HEADER_BYTES`); an end marker
+    (kind 0: the footer follows) ends the walk at the file's size.
 
     Returns
     -------
     int
-        The bytes kept (the file's size if it was whole, 0 if it is not a regular .rrd file).
+        The bytes of whole messages (the file's size if it is whole, 0 if it is not a regular .rrd
+        file), bytes.
     """
     try:
         size = path.stat().st_size
         if not path.is_file() or size < RRD_STREAM_HEADER_BYTES:
             return 0
-        with open(path, "r+b") as f:
+        with open(path, "rb") as f:
             if f.read(4) != b"RRF2":
                 return 0
             end = RRD_STREAM_HEADER_BYTES
@@ -271,11 +310,33 @@ def trim_rrd(path: Path) -> int:
                 if end + RRD_MESSAGE_HEADER_BYTES + length > size:
                     break
                 end += RRD_MESSAGE_HEADER_BYTES + length
-            if end < size:
-                f.truncate(end)
             return end
     except OSError:
         return 0
+
+
+def trim_rrd(path: Path) -> int:
+    """Cut a recording file whose writing stopped mid-message back to its last whole message
+    (:func:`whole_rrd_bytes`).
+
+    Rerun's file writer that fails (a full disk) leaves a partial message at the end, and
+    ``RrdReader(path).stream()`` refuses the whole file for it ("Message payload … exceeds file
+    size"); without it the file reads as one whose writer was stopped. Call it only once nothing
+    writes the file any more: a writer that wrote on would write past the new end.
+
+    Returns
+    -------
+    int
+        The bytes kept (the file's size if it was whole, 0 if it is not a regular .rrd file).
+    """
+    end = whole_rrd_bytes(path)
+    try:
+        if 0 < end < path.stat().st_size:
+            with open(path, "r+b") as f:
+                f.truncate(end)
+    except OSError:
+        return 0
+    return end
 
 
 def check_writable(path: Path) -> str | None:
