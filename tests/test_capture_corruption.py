@@ -90,6 +90,17 @@ def replay(path: Path, **kw: object) -> NavBatch:
     return concat_batches(got)
 
 
+def replay_cli(path: Path, timeout_s: float) -> subprocess.CompletedProcess[str]:
+    """``footnav replay PATH --no-viewer`` in a process of its own."""
+    return subprocess.run(
+        [sys.executable, "-m", "footnav.app", "replay", str(path), "--no-viewer"],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=timeout_s,
+    )
+
+
 def test_one_flipped_bit_anywhere_costs_at_most_its_own_chunk(walk: tuple[Path, NavBatch], tmp_path: Path) -> None:
     """A deterministic sweep of one flipped bit at 200 places spread over the file: every message
     outside the chunk holding the bit is read, in order; the skipped stretch is reported; a bit in the
@@ -168,13 +179,7 @@ def test_the_command_line_replays_a_damaged_capture_without_a_traceback(
     path, live = walk
     start, end, _ = chunks(path)[3]
     bad = flipped(path, tmp_path / "bad.mcap", 8 * (start + 200))
-    proc = subprocess.run(
-        [sys.executable, "-m", "footnav.app", "replay", str(bad), "--no-viewer"],
-        capture_output=True,
-        text=True,
-        check=False,
-        timeout=300,
-    )
+    proc = replay_cli(bad, timeout_s=300)
     assert proc.returncode == 0, proc.stderr
     assert "Traceback" not in proc.stderr
     assert f"bytes {start}-{end}" in proc.stderr and "samples lost" in proc.stderr
@@ -192,13 +197,7 @@ def test_a_corrupt_first_chunk_is_a_corrupt_file(walk: tuple[Path, NavBatch], tm
         assert f"{bad} is corrupt: bytes {start} to {end}, before its first message" in text
         assert "expected a footnav capture whose header and first chunk are intact" in text
         assert "no answer" not in text
-    proc = subprocess.run(
-        [sys.executable, "-m", "footnav.app", "replay", str(bad), "--no-viewer"],
-        capture_output=True,
-        text=True,
-        check=False,
-        timeout=120,
-    )
+    proc = replay_cli(bad, timeout_s=120)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr and "100 %" not in proc.stderr
     assert "is corrupt" in proc.stderr
 

@@ -11,10 +11,9 @@ The feet start still, side by side and parallel (``FootSeparation.left_origin_m`
 
 from __future__ import annotations
 
+from footnav.app.commands.export import recording_config
 from footnav.device.files.recordings import Recording
 from footnav.pipeline.errors import FootnavError
-from footnav.pipeline.navigation.navigator import NavConfig
-from footnav.pipeline.navigation.profiles import get_profile
 from footnav.pipeline.navigation.saturation import reconstruct_saturated_rates
 from footnav.pipeline.two_feet import FootSeparation, FootSignals, TwoFeetResult, navigate_feet
 
@@ -22,13 +21,6 @@ from footnav.pipeline.two_feet import FootSeparation, FootSignals, TwoFeetResult
 def _signals(rec: Recording) -> FootSignals:
     sat = reconstruct_saturated_rates(rec.t_s, rec.gyr_b_radps)
     return FootSignals(rec.t_start_s + rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, sat.clipped_b)
-
-
-def _config(rec: Recording, stance_levels: bool) -> NavConfig:
-    try:
-        return NavConfig(profile=get_profile(rec.profile), stance_levels=stance_levels)
-    except KeyError as exc:
-        raise FootnavError(f"{rec.name}: {exc.args[0]}") from None
 
 
 def navigate_pair(
@@ -71,7 +63,9 @@ def navigate_pair(
             "do not overlap in time; two feet are navigated together on one clock (the files' time stamps)"
         )
     coupling = (bound or FootSeparation()) if coupled else None
-    result = navigate_feet(sl, sr, _config(left, stance_levels), coupling, right_config=_config(right, stance_levels))
+    left_config = recording_config(left, stance_levels=stance_levels)
+    right_config = recording_config(right, stance_levels=stance_levels)
+    result = navigate_feet(sl, sr, left_config, coupling, right_config=right_config)
     for rec, nav in ((left, result.left), (right, result.right)):
         if nav is None:
             raise FootnavError(f"{rec.name}: the unit is never still, so roll and pitch cannot be aligned")

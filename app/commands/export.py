@@ -60,6 +60,22 @@ SMOOTHING = ("whole", "step")
 as a live session shows the track once each step has ended (``footnav.pipeline.smoothing.stepwise``)."""
 
 
+def recording_config(rec: Recording, profile: str | None = None, stance_levels: bool = True) -> NavConfig:
+    """The navigator's configuration for ``rec``: its unit profile (or ``profile``), with or without the stance
+    height levels.
+
+    Raises
+    ------
+    FootnavError
+        the profile is not a built-in one.
+    """
+    try:
+        unit = get_profile(profile or rec.profile)
+    except KeyError as exc:  # a recording is navigated with a built-in profile
+        raise FootnavError(f"{rec.name}: {exc.args[0]}") from None
+    return NavConfig(profile=unit, stance_levels=stance_levels)
+
+
 def navigate_recording(
     rec: Recording, profile: str | None = None, smooth: str | None = None, stance_levels: bool = True
 ) -> tuple[NavBatch, NavStats]:
@@ -76,11 +92,7 @@ def navigate_recording(
     FootnavError
         the recording never stands still, so it cannot be aligned.
     """
-    try:
-        unit = get_profile(profile or rec.profile)
-    except KeyError as exc:  # a recording is navigated with a built-in profile
-        raise FootnavError(f"{rec.name}: {exc.args[0]}") from None
-    config = NavConfig(profile=unit, stance_levels=stance_levels)
+    config = recording_config(rec, profile, stance_levels)
     sat = reconstruct_saturated_rates(rec.t_s, rec.gyr_b_radps)
     run: RecordingRun = navigate
     if smooth == "whole":
