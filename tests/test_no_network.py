@@ -241,9 +241,10 @@ def test_nothing_is_written_outside_the_folders_named(runs: tuple[list[dict[str,
     assert len(files) == 5  # one capture each in s/ (demo) and live/
 
 
-def test_the_bare_viewer_asks_what_the_issue_found_and_footnavs_environment_stops_it(tmp_path: Path) -> None:
-    """The viewer with a user's analytics config looks up Rerun's and GitHub's servers; with
-    ``rerun_environment`` and the viewer flags footnav uses it looks up none and writes nothing to HOME."""
+def test_the_bare_viewer_looks_up_outside_servers_and_footnavs_environment_stops_it(tmp_path: Path) -> None:
+    """The viewer with a user's analytics config looks up Rerun's or GitHub's servers (which of them
+    within its 15 s depends on timing: analytics are sent in batches); with ``rerun_environment`` and
+    the viewer flags footnav uses it looks up none and writes nothing to HOME."""
     from footnav.views.rerun_env import VIEWER_FLAGS, private_folder, rerun_environment
     from footnav.views.sinks import viewer_binary
 
@@ -270,7 +271,7 @@ def test_the_bare_viewer_asks_what_the_issue_found_and_footnavs_environment_stop
         analytics_data = _files(folder / "data")  # none: the config footnav writes was read
     finally:
         shutil.rmtree(folder, ignore_errors=True)
-    assert {"tel.rerun.io", "app.rerun.io", "api.github.com"} <= set(bare["names"])
+    assert set(bare["names"]) & {"tel.rerun.io", "app.rerun.io", "api.github.com"}  # the probe sees lookups
     assert footnavs["names"] == [] and _outbound(footnavs["connects"]) == []
     assert analytics_data == []
 
