@@ -44,6 +44,10 @@ def _export(args: argparse.Namespace) -> int:
         "stance_levels": args.stance_levels,
         "out_format": args.output_format,
     }
+    if args.left or args.right or args.independent_feet or args.couple_heading:
+        return _export_feet(args)
+    if not args.input:
+        raise FootnavError("what to export? give a recording, capture or folder (INPUT), or --left FILE --right FILE")
     if len(args.input) == 1 and not args.input[0].is_dir():
         print(run_export(args.input[0], args.output, steps_out=args.steps, gait_out=args.gait, **options))
         return 0
@@ -53,6 +57,33 @@ def _export(args: argparse.Namespace) -> int:
     with scheduler_client(args.scheduler) as client:
         lines, failures = run_export_batch(args.input, args.output, args.jobs, client, **options)
     return _report_batch(lines, failures, "exported")
+
+
+def _export_feet(args: argparse.Namespace) -> int:
+    from footnav.app.api.feet import export_pair
+
+    if not (args.left and args.right) or args.input:
+        raise FootnavError("two feet are exported as --left FILE --right FILE, without other inputs")
+    if args.smooth:
+        raise FootnavError("--smooth applies to one foot's recording; two feet are navigated with the causal filter")
+    if args.jobs is not None or args.scheduler:
+        raise FootnavError("--jobs and --scheduler are for a folder or several files; two feet run in this process")
+    print(
+        export_pair(
+            args.left,
+            args.right,
+            args.output,
+            coupling=_feet_coupling(args) or "distance",
+            fmt=args.format,
+            columns=args.columns,
+            profile=args.profile,
+            stance_levels=args.stance_levels,
+            steps_out=args.steps,
+            gait_out=args.gait,
+            out_format=args.output_format,
+        )
+    )
+    return 0
 
 
 def _report_batch(lines: list[str], failures: list[str], done: str) -> int:
@@ -107,6 +138,16 @@ def _evaluate_feet(args: argparse.Namespace) -> int:
     print(format_table(rows))
     print(pair_summary(rows))
     return 0
+
+
+def _feet_coupling(args: argparse.Namespace, two_feet: bool = True) -> str | None:
+    """``--independent-feet`` / ``--couple-heading`` as a ``FEET_COUPLINGS`` name (None: neither given)."""
+    if args.couple_heading and args.independent_feet:
+        raise FootnavError("--couple-heading couples the feet; --independent-feet does not: give one of them")
+    given = "independent" if args.independent_feet else ("distance+heading" if args.couple_heading else None)
+    if given is not None and not two_feet:
+        raise FootnavError("--independent-feet and --couple-heading are for two feet (--left and --right, --feet 2)")
+    return given
 
 
 def _config(args: argparse.Namespace) -> Config:
@@ -165,6 +206,7 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
             output=args.mode,
             model=args.unit,
             lsl=_lsl(args),
+            feet_coupling=_feet_coupling(args, two_feet=len(ports) == 2) or "distance",
         )
     )
 
@@ -253,6 +295,7 @@ def _replay_capture(args: argparse.Namespace) -> int:
             tof=not args.without_tof,
             stance=args.stance,
             lsl=_lsl(args),
+            feet_coupling=_feet_coupling(args),
         )
     )
 
@@ -267,6 +310,8 @@ def _replay_recording(args: argparse.Namespace) -> int:
         "--without-tof": args.without_tof,
         "--stance": args.stance is not None,
         "--config": args.config is not None,
+        "--independent-feet": args.independent_feet,
+        "--couple-heading": args.couple_heading,
     }
     _only_for(args, capture_only, "a recording from another tool, navigated whole")
     if args.smooth and args.step_smoothing:
@@ -325,6 +370,7 @@ def _demo(args: argparse.Namespace) -> int:
             unit=args.unit,
             mode=args.mode,
             lsl=_lsl(args),
+            feet_coupling=_feet_coupling(args, two_feet=args.feet == 2) or "distance",
         )
     )
 

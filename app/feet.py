@@ -24,7 +24,7 @@ from footnav.app import heap
 from footnav.app.calibration_store import StoredCalibration, any_calibrations, calibration_dir, load_calibration
 from footnav.app.config import Config
 from footnav.app.session import CalibrationLookup, LinkHealth, UnitAddress
-from footnav.app.status import StatusLine, input_handling
+from footnav.app.status import StatusLine, input_handling, lead_in_note
 from footnav.app.stream import SerialSessionResult
 from footnav.device.errors import DeviceError
 from footnav.device.files.capture import CaptureTap, CaptureWriter, UnitHeader
@@ -46,6 +46,7 @@ from footnav.views.dual_imu import DualRunView
 from footnav.views.outputs import SessionViews
 
 if TYPE_CHECKING:
+    from footnav.pipeline.two_feet.live import FeetLockstep
     from footnav.views.lsl import LslFoot, LslOutlets
 
 FOOT_START_OFFSET_M: dict[str, tuple[float, float, float]] = {
@@ -175,6 +176,10 @@ class FootRun:
 
     views: SessionViews | None = None
     """The session's views (set by :func:`foot_sinks`)."""
+    lead_in_sinks: list[NavSink] = field(default_factory=list)
+    """Where the samples before the alignment go once navigated backwards (:meth:`lead_in_sink`): the
+    views and the tests' collectors; not the status line, the link health or LSL, whose samples go in
+    time order."""
 
     def finish_events(self) -> None:
         """Hand the views the whole-swing clearance still held when the foot's stream ended."""
@@ -185,6 +190,16 @@ class FootRun:
     def pipeline_sinks(self) -> list[NavSink]:
         """What the pipeline feeds: every sink, with the batches' gait events filled in."""
         return [self.events.feeding(self.sinks)]
+
+    def add_collector(self, sink: NavSink) -> None:
+        """Feed ``sink`` every batch, the lead-in included (the tests' collectors)."""
+        self.sinks.append(sink)
+        self.lead_in_sinks.append(sink)
+
+    def lead_in_sink(self) -> NavSink:
+        """What the session hands the lead-in to (``footnav.app.session.run_unit_session``): every one
+        of :attr:`lead_in_sinks`, with its steps found by a tracker of its own."""
+        return GaitEventTracker().feeding(self.lead_in_sinks)
 
 
 def gap_fields(gap: LinkGap | None) -> dict[str, Any]:
@@ -301,7 +316,7 @@ def link_summary(run: FootRun) -> str:
         )
     if handled := input_handling(run.navigator.stats):
         line += f"; {handled}"
-    return line
+    return line + lead_in_note(run.navigator.stats).replace(", ", "; ", 1)
 
 
 def foot_sinks(
@@ -310,6 +325,7 @@ def foot_sinks(
     """Wire a foot to the views (display-offset when two feet), the status line and link health
     (the LSL outlets, with ``--lsl``, are wired by :func:`open_lsl_outlets`)."""
     run.sinks = [status.foot(run.foot)]
+    run.lead_in_sinks = [status.foot(run.foot).lead_in]
     run.views = views
     if views is not None:
         display: NavSink = views.sink(run.foot, timeout_s=put_timeout_s)
@@ -317,6 +333,7 @@ def foot_sinks(
             display = offset_sink(display, FOOT_START_OFFSET_M[run.foot])
         run.health = LinkHealth(views.log_link, run.foot, clock_rate_hz=lambda: run.result.clock_rate_hz)
         run.sinks = [display, run.health, *run.sinks]
+        run.lead_in_sinks = [display, *run.lead_in_sinks]
 
 
 BLE_FIRST_FOUND = "ble:first-found"
@@ -410,8 +427,12 @@ def close_lsl_outlets(lsl: LslOutlets | None) -> None:
         print(lsl.summary(), file=sys.stderr)
 
 
-async def run_feet(runs: Sequence[FootRun], session: Callable[[FootRun], Awaitable[Any]]) -> None:
+async def run_feet(
+    runs: Sequence[FootRun], session: Callable[[FootRun], Awaitable[Any]], lockstep: FeetLockstep | None = None
+) -> None:
     """Run every foot's session at once; a foot whose unit fails is reported and the others carry on.
+    With ``lockstep`` (``footnav.pipeline.two_feet.live.lockstep_for``) a foot's session ends once its
+    last estimates are out.
 
     Raises
     ------
@@ -420,13 +441,20 @@ async def run_feet(runs: Sequence[FootRun], session: Callable[[FootRun], Awaitab
     """
 
     async def one(run: FootRun) -> None:
+        side = 0 if lockstep is None else lockstep.side(run.foot)
         try:
             await session(run)
+            if lockstep is not None:  # its last cells wait for the other foot's samples
+                lockstep.end(side)
+                while not lockstep.drained(side):
+                    await asyncio.sleep(0.02)
         except (FootnavError, OSError) as exc:
             run.error = exc
             if len(runs) > 1:
                 notice(f"{run.foot} foot stopped: {exc}")
         finally:
+            if lockstep is not None:
+                lockstep.end(side)
             run.finish_events()
 
     trimmer = asyncio.create_task(heap.trim_periodically())
@@ -434,6 +462,8 @@ async def run_feet(runs: Sequence[FootRun], session: Callable[[FootRun], Awaitab
         await asyncio.gather(*(one(r) for r in runs))
     finally:
         trimmer.cancel()
+    if lockstep is not None:
+        print(lockstep.summary())
     errors = [r.error for r in runs if r.error is not None]
     if errors and len(errors) == len(runs):
         raise errors[0] if isinstance(errors[0], FootnavError) else DeviceError(str(errors[0]))

@@ -147,6 +147,21 @@ def _add_step_smoothing_arg(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_feet_coupling_args(p: argparse.ArgumentParser, *, default: str) -> argparse._ArgumentGroup:
+    feet = p.add_argument_group("two feet", f"how a left and a right foot are navigated (default: {default})")
+    feet.add_argument(
+        "--independent-feet",
+        action="store_true",
+        help="navigate each foot on its own (default: the feet's filters coupled by the inter-foot distance bound)",
+    )
+    feet.add_argument(
+        "--couple-heading",
+        action="store_true",
+        help="couple the feet's headings in stance too (experimental; see `footnav evaluate --couple-heading`)",
+    )
+    return feet
+
+
 def _add_lever_arm_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--lever-arm",
@@ -229,6 +244,7 @@ def _add_demo_command(sub: Commands) -> None:
     _add_config_args(demo)
     _add_step_smoothing_arg(demo)
     _add_stance_arg(demo, default="inertial")
+    _add_feet_coupling_args(demo, default="coupled, with --feet 2")
     demo.add_argument("--feet", type=int, choices=(1, 2), default=1, help="emulated shoes: 1, or 2 (left and right)")
     demo.add_argument(
         "--unit",
@@ -323,6 +339,7 @@ def _add_live_command(sub: Commands) -> None:
     _add_config_args(live)
     _add_step_smoothing_arg(live)
     _add_stance_arg(live, default="inertial")
+    _add_feet_coupling_args(live, default="coupled, with --left and --right")
     live.add_argument(
         "--rate-divider",
         type=int,
@@ -404,6 +421,7 @@ def _add_replay_command(sub: Commands) -> None:
     _add_config_args(replay)
     _add_step_smoothing_arg(replay)
     _add_stance_arg(replay, default=None)
+    _add_feet_coupling_args(replay, default="as the captured session was")
     recording = replay.add_argument_group("recordings from other tools")
     recording.add_argument(
         "--format", choices=RECORDING_FORMATS, help="recording format (default: detected from the file)"
@@ -421,10 +439,10 @@ def _add_export_command(sub: Commands) -> None:
     export.add_argument(
         "input",
         type=Path,
-        nargs="+",
+        nargs="*",
         metavar="INPUT",
         help="a PyShoe .mat, x-io CSV, OpenShoe log, CSV, a unit's raw log, or a footnav capture; or folders of "
-        "them, or several",
+        "them, or several (or --left and --right)",
     )
     export.add_argument(
         "-o",
@@ -457,6 +475,9 @@ def _add_export_command(sub: Commands) -> None:
     )
     _add_recording_args(export)
     _add_jobs_arg(export)
+    feet = _add_feet_coupling_args(export, default="coupled; on one clock, to TRACK-left.csv, TRACK-right.csv")
+    feet.add_argument("--left", type=Path, metavar="FILE", help="the left foot's recording (with --right)")
+    feet.add_argument("--right", type=Path, metavar="FILE", help="the right foot's recording (with --left)")
 
 
 def _add_jobs_arg(parser: argparse.ArgumentParser) -> None:
@@ -503,7 +524,7 @@ def _add_evaluate_command(sub: Commands) -> None:
         "--couple-heading",
         action="store_true",
         help="couple the feet's headings in stance too (experimental: -32 %% mean error on emulated walks with "
-        "axis errors, but one walk without them 3 cm worse)",
+        "axis errors, but +12 %% on those without them)",
     )
     _add_jobs_arg(evaluate)
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -27,7 +27,10 @@ from footnav.device.modes import InsMode, Mode, NormalImuMode, RawImuMode, Stepw
 from footnav.device.unit import LinkStats, OpenShoeUnit
 from footnav.pipeline.calibration.model import CalibrationError
 from footnav.pipeline.nav_types import NavBatch
+from footnav.pipeline.navigation.lead_in import LiveLeadIn
+from footnav.pipeline.navigation.navigator import Navigator
 from footnav.pipeline.runner import BatchNavigator, NavSink, run_pipeline
+from footnav.pipeline.samples import ImuBatch
 
 if TYPE_CHECKING:
     from footnav.app.calibration_store import StoredCalibration
@@ -54,6 +57,69 @@ def _shown_since(start_s: float, sinks: Sequence[NavSink]) -> NavSink:
                 sink(part)
 
     return show
+
+
+class _FillingIn:
+    """The navigator as the runner drives it, with its lead-in filled in (``footnav.pipeline.navigation.lead_in
+    .LiveLeadIn``): handed to ``sink`` once, as one batch earlier than those already given."""
+
+    def __init__(self, navigator: Navigator, sink: NavSink) -> None:
+        self.navigator, self.sink = navigator, sink
+        self.lead_in = LiveLeadIn(navigator)
+
+    @property
+    def rate_hz(self) -> float:
+        return self.navigator.rate_hz
+
+    def retime(self, rate_hz: float) -> None:
+        self.navigator.retime(rate_hz)
+
+    def add_ranges(self, batch: Any) -> None:
+        self.navigator.add_ranges(batch)
+
+    def add_pressure(self, batch: Any) -> None:
+        self.navigator.add_pressure(batch)
+
+    def process(self, batch: ImuBatch) -> NavBatch | None:
+        self.lead_in.add(batch)
+        nav = self.navigator.process(batch)
+        if (lead_in := self.lead_in.after(nav)) is not None:
+            self.sink(lead_in)
+        return nav
+
+    def finish(self) -> None:
+        """At the end of the stream: the lead-in whose still period lasted to it."""
+        if (lead_in := self.lead_in.finish()) is not None:
+            self.sink(lead_in)
+
+
+def _filling_in(
+    navigator: BatchNavigator[Any],
+    lead_in: NavSink | None,
+    window: tuple[float, float] | None,
+    mode: Mode | None,
+    fuse_imus: bool,
+) -> _FillingIn | None:
+    """The navigator with its lead-in handed to ``lead_in`` (shown within a replay's ``window``), if
+    it is a single-IMU one fed IMU samples (the calibrated output, or ``fuse_imus``) and ``lead_in``
+    is given."""
+    if lead_in is None or not (mode is None or fuse_imus) or not isinstance(navigator, Navigator):
+        return None
+    return _FillingIn(navigator, lead_in if window is None else _shown_since(window[0], [lead_in]))
+
+
+async def _navigate(
+    samples: AsyncIterator[Any], navigator: BatchNavigator[Any], sinks: Sequence[NavSink], filling: _FillingIn | None
+) -> None:
+    """``run_pipeline``, through ``filling`` when given: its lead-in is filled in at the end of the
+    stream too, or when the session is stopped."""
+    if filling is None:
+        await run_pipeline(samples, navigator, sinks)
+        return
+    try:
+        await run_pipeline(samples, filling, sinks)
+    finally:
+        filling.finish()
 
 
 def _idle_notice_s(mode: Mode | None, idle_notice_s: float | None) -> float | None:
@@ -251,6 +317,7 @@ async def run_device_session(
     on_rate: Callable[[float, float], None] | None = None,
     fuse_imus: bool = False,
     on_stepwise_only: Callable[[str], BatchNavigator[Any]] | None = None,
+    lead_in: NavSink | None = None,
 ) -> SerialSessionResult:
     """Open the unit at ``address`` through a :class:`~footnav.device.links.reconnecting.ReconnectingLink`, start
     its IMU
@@ -271,8 +338,8 @@ async def run_device_session(
     ``mode``: the output mode to start (None: the calibrated-IMU stream at ``rate_divider_log2``);
     ``RawImuMode`` streams ``RawImuBatch`` es (e.g. the dual-IMU board) to a matching navigator;
     ``extensions``: also switch on the unit's ToF and barometer states (footnav's extension states
-    0xE1/0xE2); their readings go to the navigator; ``on_rate``, ``fuse_imus``, ``on_stepwise_only``:
-    see :func:`run_unit_session`.
+    0xE1/0xE2); their readings go to the navigator; ``on_rate``, ``fuse_imus``, ``on_stepwise_only``,
+    ``lead_in``: see :func:`run_unit_session`.
 
     Raises
     ------
@@ -300,6 +367,7 @@ async def run_device_session(
         on_rate=on_rate,
         fuse_imus=fuse_imus,
         on_stepwise_only=on_stepwise_only,
+        lead_in=lead_in,
     )
 
 
@@ -347,6 +415,7 @@ async def run_unit_session(
     on_rate: Callable[[float, float], None] | None = None,
     fuse_imus: bool = False,
     on_stepwise_only: Callable[[str], BatchNavigator[Any]] | None = None,
+    lead_in: NavSink | None = None,
 ) -> SerialSessionResult:
     """Navigate an open unit's stream (see :func:`run_device_session`); ``start=False`` for a replay,
     where the captured bytes already hold the start and no stop is sent; ``idle_notice_s=None`` never
@@ -360,7 +429,9 @@ async def run_unit_session(
     differ); ``fuse_imus``: a ``RawImuMode`` stream's IMUs averaged into one IMU for a single-IMU
     navigator (``footnav.app.stream.fused_imus``); ``on_stepwise_only(reason)``: the firmware offers
     stepwise output only (2014 MIMU22BT): start that instead, with the navigator this returns (for
-    ``footnav.device.onboard.OnboardStepNavigator``), rather than fail. Closes the unit."""
+    ``footnav.device.onboard.OnboardStepNavigator``), rather than fail; ``lead_in``: where the
+    samples before the alignment go once navigated backwards (:class:`_FillingIn`; a single-IMU
+    navigator's IMU samples only). Closes the unit."""
     result = result if result is not None else SerialSessionResult()
     name = unit.link.name
 
@@ -411,7 +482,9 @@ async def run_unit_session(
         if stored is not None and mode is None:
             samples = corrected(samples, stored.calibration)
         shown = sinks if window is None else [_shown_since(window[0], sinks)]
-        await run_pipeline(samples, navigator, [*shown, keep_last])
+        await _navigate(
+            samples, navigator, [*shown, keep_last], _filling_in(navigator, lead_in, window, mode, fuse_imus)
+        )
     finally:
         result.link = unit.stats
         if start:

@@ -47,6 +47,11 @@ class FootStatus:
         if self._owner is not None:
             self._owner.maybe_draw()
 
+    def lead_in(self, nav: NavBatch) -> None:
+        """A lead-in filled in (``footnav.pipeline.navigation.lead_in.LiveLeadIn``): its distance added;
+        the time, the stance and the rate stay those of the latest samples."""
+        self.distance_m += float(np.linalg.norm(np.diff(nav.pos_n_m, axis=0), axis=1).sum())
+
     def rate_hz(self) -> float:
         """Samples per second of wall time over the last :data:`RATE_WINDOW_S` or so."""
         now = time.monotonic()
@@ -213,6 +218,15 @@ class ProgressBar:
         if self.tty:
             self.stream.write("\n")
             self.stream.flush()
+
+
+def lead_in_note(stats: NavStats) -> str:
+    """What became of the samples before the first still period, as ", ..." for a summary (empty: none)."""
+    backwards = stats.samples_navigated_backwards
+    dropped = stats.samples_before_alignment - backwards
+    notes = [f"{backwards} samples before the first still period navigated backwards from it"] if backwards else []
+    notes += [f"{dropped} samples before the first still period not navigated"] if dropped else []
+    return "".join(f", {n}" for n in notes)
 
 
 def input_handling(stats: NavStats) -> str:

@@ -1,20 +1,23 @@
 """Two feet coupled (distance bound, relative heading) against two independent feet, on emulated walks.
 
-    .venv/bin/python -m benchmarks.two_feet [--seeds 4] [--duration 90] [--bounds 1.2]
-        [--variants default,distance,heading] [--heading-sigma 4] [--heading-drift 0]
-        [--heading-drift-per-turn 0.02]
+    .venv/bin/python -m benchmarks.two_feet [--seeds 4] [--duration 90] [--courses rectangle,...]
+        [--axes none,gyro-bias-calibrated] [--bounds 1.2] [--variants default,distance,heading]
+        [--heading-sigma 4] [--heading-drift 0] [--heading-drift-per-turn 0.02]
 
-Each course (rectangle, figure-eight, line, stairs) and seed is walked by two emulated feet
-(``two_feet_walks``), each given its own errors of the MPU-6500 x4 grade (biases, bias instability,
-noise), without and with the axis errors ``gyro-bias-calibrated`` (the datasheet's gyroscope scale and
-cross-axis errors, which make the heading drift). Both feet are navigated independently and coupled
-(``footnav.pipeline.two_feet``) by each variant of ``--variants`` with each bound R of ``--bounds``:
-``distance`` the distance bound alone, ``heading`` the relative heading constraint alone (σ, drift per
-stride and per turn from ``--heading-sigma``, ``--heading-drift`` in degrees, ``--heading-drift-per-turn``),
-``distance+heading`` both (those σ and drifts), ``default`` the default ``FootSeparation`` with R.
-Printed per walk: each foot's final and mean-along-the-walk horizontal error, independent and
-coupled (the first variant and R), and the change of the two feet's mean error in %; then per
-variant and R the mean over the walks, how many got worse by more than 1 cm, and the runtime ratio
+Each course (rectangle, figure-eight, line, stairs; ``--courses`` a subset) and seed is walked by two
+emulated feet (``two_feet_walks``), each given its own errors of the MPU-6500 x4 grade (biases, bias
+instability, noise), without and with the axis errors ``gyro-bias-calibrated`` (the datasheet's
+gyroscope scale and cross-axis errors, which make the heading drift; ``--axes`` one of them). Both
+feet are navigated independently and coupled (``footnav.pipeline.two_feet``) by each variant of
+``--variants`` with each bound R of ``--bounds``: ``default`` the default ``FootSeparation`` with R
+(the bound and the relative heading), ``distance`` the distance bound alone, ``heading`` the relative
+heading constraint alone (σ, drift per stride and per turn from ``--heading-sigma``,
+``--heading-drift`` in degrees, ``--heading-drift-per-turn``), ``distance+heading`` both (those σ and
+drifts). Printed per walk: each foot's final and mean-along-the-walk horizontal error, independent
+and coupled (the first variant and R), and the change of the two feet's mean error in %; then per
+axis errors, course (and all courses) and variant the mean over the walks, its change, the worst
+change of one walk, the noise (the SD over the seeds of the independent error: what changing the
+IMU's error draw alone does), how many walks got worse by more than 1 cm, and the runtime ratio
 coupled / independent.
 """
 
@@ -33,6 +36,8 @@ from footnav.pipeline.two_feet import FootSeparation, FootSignals, navigate_feet
 from footnav.pipeline.two_feet.heading import RelativeHeading
 
 COURSES = ("rectangle", "figure8", "line", "stairs")
+AXES = ("none", "gyro-bias-calibrated")
+"""The axis errors walked: none, and the datasheet's (``footnav.device.emulator.sensors.imu_errors``)."""
 WORSE_M = 0.01
 """A walk counts as worse when its mean horizontal error grew by more than this, m."""
 
@@ -96,10 +101,33 @@ def run(course: str, seed: int, duration_s: float, axes: str, variants: dict[str
     return out
 
 
+def summarize(summary: dict[tuple[str, str, str], list[tuple[float, float, float, float]]]) -> None:
+    """Print, per axis errors, course (and all courses) and variant: the mean over the walks of the two
+    feet's mean error, independent and coupled, its change, the worst change of one walk, the noise
+    (the SD over the seeds of the independent error), the walks worse by more than ``WORSE_M`` and
+    the runtime ratio coupled / independent."""
+    print(
+        f"{'axes':<6}{'course':<10}{'variant@R m':>22}  {'indep mean':>10} {'coupled':>8} {'change':>7} "
+        f"{'worst cm':>8} {'noise cm':>8} {'worse>1cm':>10} {'time ratio':>10}"
+    )
+    for (tag, course, name), rows in summary.items():
+        a = np.array(rows)
+        worse = int(np.count_nonzero(a[:, 1] - a[:, 0] > WORSE_M))
+        change = 100.0 * (a[:, 1].mean() / a[:, 0].mean() - 1.0)
+        noise = 100.0 * float(np.std(a[:, 0], ddof=1)) if course != "all" and len(a) > 1 else math.nan
+        print(
+            f"{tag:<6}{course:<10}{name:>22}  {a[:, 0].mean():>10.4f} {a[:, 1].mean():>8.4f} {change:>+6.0f}% "
+            f"{100.0 * (a[:, 1] - a[:, 0]).max():>+8.2f} {noise:>8.2f} {worse:>6}/{len(a):<3} "
+            f"{a[:, 3].sum() / a[:, 2].sum():>10.2f}"
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--duration", type=float, default=90.0)
+    ap.add_argument("--courses", default=",".join(COURSES), help="comma-separated, of " + ", ".join(COURSES))
+    ap.add_argument("--axes", default=",".join(AXES), help="axis errors, comma-separated, of " + ", ".join(AXES))
     ap.add_argument("--bounds", default="1.2", help="R values, m, comma-separated")
     ap.add_argument("--variants", default="default", help=f"comma-separated, of {', '.join(VARIANTS)}")
     ap.add_argument("--heading-sigma", type=float, default=None, help="σ of the relative heading, degrees")
@@ -115,16 +143,19 @@ def main(argv: list[str] | None = None) -> int:
     if args.heading_drift_per_turn is not None:
         heading = dataclasses.replace(heading, drift_per_turn=args.heading_drift_per_turn)
     variants = couplings(args.variants.split(","), bounds, heading)
+    courses, axes_list = args.courses.split(","), args.axes.split(",")
+    if not set(courses) <= set(COURSES) or not set(axes_list) <= set(AXES):
+        raise SystemExit(f"courses: of {', '.join(COURSES)}; axes: of {', '.join(AXES)}")
     warm = walk_signals("line", 1, 10.0, "none")[1]
     navigate_feet(warm[0], warm[1], coupling=FootSeparation(heading=RelativeHeading()))  # compile first
     main_r = next(iter(variants))
     print(f"two feet, {args.duration:.0f} s walks, mpu6500x4; horizontal error, m (L/R); coupled: {main_r}")
     hdr = f"{'axes':<6}{'course':<10}{'seed':>4}  {'indep end':>11} {'indep mean':>11}  "
     print(hdr + f"{'coupled end':>11} {'cpl mean':>11} {'updates':>7} {'change':>7}")
-    summary: dict[tuple[str, str], list[tuple[float, float, float, float]]] = {}
-    for axes in ("none", "gyro-bias-calibrated"):
+    summary: dict[tuple[str, str, str], list[tuple[float, float, float, float]]] = {}
+    for axes in axes_list:
         tag = "none" if axes == "none" else "axes"
-        for course in COURSES:
+        for course in courses:
             for seed in range(1, args.seeds + 1):
                 r = run(course, seed, args.duration, axes, variants)
                 fl, fr, ml, mr, ti, _ = r["ind"]
@@ -132,7 +163,8 @@ def main(argv: list[str] | None = None) -> int:
                 for name in variants:
                     cfl, cfr, cml, cmr, tc, nc = r[name]
                     cpl_mean = 0.5 * (cml + cmr)
-                    summary.setdefault((tag, name), []).append((ind_mean, cpl_mean, ti, tc))
+                    for group in (course, "all"):
+                        summary.setdefault((tag, group, name), []).append((ind_mean, cpl_mean, ti, tc))
                     if name == main_r:
                         change = 100.0 * (cpl_mean / ind_mean - 1.0)
                         print(
@@ -140,18 +172,7 @@ def main(argv: list[str] | None = None) -> int:
                             f"{cfl:>5.2f}/{cfr:<5.2f} {cml:>5.2f}/{cmr:<5.2f} {nc:>7} {change:>+6.0f}%"
                         )
     print()
-    print(
-        f"{'axes':<6}{'variant@R m':>22}  {'indep mean':>10} {'coupled':>8} {'change':>7} {'worse>1cm':>10} "
-        f"{'time ratio':>10}"
-    )
-    for (tag, name), rows in summary.items():
-        a = np.array(rows)
-        worse = int(np.count_nonzero(a[:, 1] - a[:, 0] > WORSE_M))
-        change = 100.0 * (a[:, 1].mean() / a[:, 0].mean() - 1.0)
-        print(
-            f"{tag:<6}{name:>22}  {a[:, 0].mean():>10.3f} {a[:, 1].mean():>8.3f} {change:>+6.0f}% "
-            f"{worse:>6}/{len(a):<3} {a[:, 3].sum() / a[:, 2].sum():>10.2f}"
-        )
+    summarize(dict(sorted(summary.items(), key=lambda kv: (kv[0][0], kv[0][1] == "all"))))
     return 0
 
 

@@ -35,8 +35,10 @@ class BatchNavigator(Protocol[BatchT_contra]):
     """What the runner drives: ``footnav.pipeline.navigation.navigator.Navigator`` (``ImuBatch``) or
     ``footnav.pipeline.dual_imu.navigator.DualNavigator`` (two-IMU batches)."""
 
-    rate_hz: float
-    """The sample rate it navigates at, Hz."""
+    @property
+    def rate_hz(self) -> float:
+        """The sample rate it navigates at, Hz."""
+        ...
 
     def process(self, batch: BatchT_contra) -> NavBatch | None:
         """Estimates for the batch's samples (None while there are none yet)."""
@@ -63,10 +65,15 @@ async def run_pipeline(
     queue_batches: int = 256,
 ) -> None:
     """Run until ``source`` is exhausted; every batch reaches the navigator, every estimate every sink.
+    A navigator with a ``bind_sinks(sinks)`` method is given the sinks and hands its estimates to them
+    itself, when it has made them (two feet in lockstep: ``footnav.pipeline.two_feet.live``).
 
     Raises whatever the source, navigator or a sink raised (the other stage is cancelled).
     """
     queue: asyncio.Queue[Any] = asyncio.Queue(maxsize=queue_batches)
+    bind = getattr(navigator, "bind_sinks", None)
+    if bind is not None:  # it hands its estimates to the sinks itself (footnav.pipeline.two_feet.live)
+        bind(sinks)
 
     async def produce() -> None:
         async for batch in source:

@@ -94,8 +94,11 @@ def test_coupled_beats_independent_with_axis_errors() -> None:
 @pytest.mark.parametrize("course", ["rectangle", "figure8", "line", "stairs"])
 def test_the_truth_never_violates_the_coupling(course: str) -> None:
     # error-free signals: the estimates are the truth to within the integration, so every innovation of
-    # the relative heading is the model's own error on the course, and the distance bound never acts
-    left, right = two_feet_walks(course, 60.0, seed=3)
+    # the relative heading is the model's own error on the course, and the distance bound never acts. 90 s:
+    # on the stairs the emulated feet's landings drift together (0.03 s apart from 65 s on, seed 3), and
+    # the feet then settle in one batch; paired in the order they settled, one foot was measured against
+    # the other's newer stance (innovations of 45°)
+    left, right = two_feet_walks(course, 90.0, seed=3)
     n = min(len(left), len(right))
     delta = left.pos_n_m[:n, :2] + LEFT_ORIGIN_M[:2] - right.pos_n_m[:n, :2] - RIGHT_ORIGIN_M[:2]
     assert np.hypot(*delta.T).max() < FootSeparation().max_m - 0.15  # 0.78 m level, 1.02 m stairs

@@ -7,11 +7,15 @@ synchronised units), their saturated gyroscope stretches are reconstructed as fo
 navigators in lockstep, coupled by the inter-foot distance bound (``footnav.pipeline.two_feet.separation``)
 or, with ``coupled=False``, independently: then each foot's estimates are those of its navigator alone.
 The feet start still, side by side and parallel (``FootSeparation.left_origin_m``/``right_origin_m``).
+:func:`export_pair` is ``footnav export --left L --right R``: both feet's tracks written, as ``export``
+writes one foot's.
 """
 
 from __future__ import annotations
 
-from footnav.app.commands.export import recording_config
+from pathlib import Path
+
+from footnav.app.commands.export import load_other_recording, recording_config, write_steps_csv, write_track
 from footnav.device.files.recordings import Recording
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.navigation.saturation import reconstruct_saturated_rates
@@ -30,6 +34,7 @@ def navigate_pair(
     coupled: bool = True,
     bound: FootSeparation | None = None,
     stance_levels: bool = True,
+    profile: str | None = None,
 ) -> TwoFeetResult:
     """Navigate a left and a right recording together (module docstring).
 
@@ -43,6 +48,8 @@ def navigate_pair(
         The bound R (default ``DEFAULT_MAX_SEPARATION_M``), its noise and the feet's start positions.
     stance_levels : bool
         Use the stance height levels (``footnav.pipeline.stance.levels``), as ``navigate`` does.
+    profile : str, optional
+        The unit noise profile of both (None: each recording's own).
 
     Returns
     -------
@@ -63,10 +70,72 @@ def navigate_pair(
             "do not overlap in time; two feet are navigated together on one clock (the files' time stamps)"
         )
     coupling = (bound or FootSeparation()) if coupled else None
-    left_config = recording_config(left, stance_levels=stance_levels)
-    right_config = recording_config(right, stance_levels=stance_levels)
+    left_config = recording_config(left, profile, stance_levels=stance_levels)
+    right_config = recording_config(right, profile, stance_levels=stance_levels)
     result = navigate_feet(sl, sr, left_config, coupling, right_config=right_config)
     for rec, nav in ((left, result.left), (right, result.right)):
         if nav is None:
             raise FootnavError(f"{rec.name}: the unit is never still, so roll and pitch cannot be aligned")
     return result
+
+
+def foot_path(path: Path, foot: str) -> Path:
+    """``<stem>-<foot><suffix>`` beside ``path``: one foot's file of a pair (as a two-feet capture's export)."""
+    return path.with_name(f"{path.stem}-{foot}{path.suffix}")
+
+
+def export_pair(
+    left: Path,
+    right: Path,
+    out: Path,
+    *,
+    coupling: str = "distance",
+    fmt: str | None = None,
+    columns: str | None = None,
+    profile: str | None = None,
+    stance_levels: bool = True,
+    steps_out: Path | None = None,
+    gait_out: Path | None = None,
+    out_format: str | None = None,
+) -> str:
+    """Navigate a left and a right recording together (:func:`navigate_pair`) and write each foot's track
+    to ``<stem>-left<suffix>`` and ``<stem>-right<suffix>`` beside ``out`` (as ``export`` writes one, in
+    ``out_format`` or as the suffix says), with ``steps_out`` and ``gait_out`` named alike; returns the summary.
+
+    Parameters
+    ----------
+    left, right, out : Path
+        The recordings, and the track's name.
+    coupling : str
+        ``"distance"``, ``"distance+heading"`` or ``"independent"``
+        (``footnav.pipeline.two_feet.live.FEET_COUPLINGS``).
+    fmt, columns, profile, stance_levels, steps_out, gait_out, out_format
+        As for one recording (``footnav.app.commands.export.run_export``).
+
+    Raises
+    ------
+    FootnavError
+        a file cannot be read, the two do not overlap in time, or a foot never stands still.
+    """
+    from footnav.app.commands.export import track_format
+    from footnav.pipeline.two_feet.live import coupling_bound
+
+    track_format(out, out_format)  # a name that contradicts the format is refused before any work
+    bound = coupling_bound(coupling)
+    recs = [load_other_recording(p, fmt, columns) for p in (left, right)]
+    result = navigate_pair(
+        recs[0], recs[1], coupled=bound is not None, bound=bound, stance_levels=stance_levels, profile=profile
+    )
+    written, gait = [], []
+    for foot, nav in (("left", result.left), ("right", result.right)):
+        assert nav is not None  # navigate_pair raises otherwise
+        write_track(nav, foot_path(out, foot), out_format)
+        written.append(f"{len(nav)} rows to {foot_path(out, foot)}")
+        if steps_out is not None:
+            written.append(write_steps_csv(nav, foot_path(steps_out, foot)))
+        if gait_out is not None:
+            from footnav.app.api.gait_export import export_gait
+
+            gait.append(export_gait(nav, foot_path(gait_out, foot), causal_from=0, label=f" {foot}"))
+    how = "independent" if bound is None else f"coupled: {len(result.corrections)} corrections of the distance bound"
+    return f"wrote {'; '.join(written)} (two feet, {how})" + "".join(f"\n{g}" for g in gait)

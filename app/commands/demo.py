@@ -48,7 +48,7 @@ from footnav.app.feet import (
     unit_header,
 )
 from footnav.app.session import UnitAddress, run_device_session
-from footnav.app.status import StatusLine, input_handling
+from footnav.app.status import StatusLine, input_handling, lead_in_note
 from footnav.app.stream import SerialSessionResult
 from footnav.device.emulator.motion.floors import floor_of
 from footnav.device.emulator.motion.gait import SPEED_RANGE_MPS, GaitTruth, simulate_walk, two_feet_walks
@@ -67,6 +67,7 @@ from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.navigation.navigator import Navigator
 from footnav.pipeline.navigation.profiles import get_profile
 from footnav.pipeline.runner import NavSink
+from footnav.pipeline.two_feet.live import LOCKSTEP_MAX_LEAD_S, lockstep_for
 from footnav.views.lsl import LslRequest, lsl_feet
 from footnav.views.outputs import open_session_views
 from numpy.typing import NDArray
@@ -127,6 +128,13 @@ class DemoOptions:
     lsl: LslRequest | None = None
     """``--lsl``: the estimates on Lab Streaming Layer too (:mod:`footnav.views.lsl`), as from a unit
     named ``emulator``."""
+    feet_coupling: str = "distance"
+    """Two feet: coupled by the distance bound, with the relative heading too, or independent
+    (``footnav.pipeline.two_feet.live.FEET_COUPLINGS``)."""
+    initial_still_s: float = 3.0
+    """Tests: how long one emulated foot stands before its first stride, s (0: it starts in motion,
+    and its lead-in is filled in once it stands still: ``footnav.pipeline.navigation.lead_in``; the
+    summary's position error is then against a truth whose origin is not the track's)."""
 
 
 @dataclass(frozen=True)
@@ -213,7 +221,14 @@ def demo_truth(
     elif opts.feet == 2:
         truth = two_feet_walks(opts.path, opts.duration_s, speed_mps=opts.speed_mps, seed=opts.seed)[foot_index]
     else:
-        truth = simulate_walk(opts.path, opts.duration_s, rate_hz=1000.0, speed_mps=opts.speed_mps, seed=opts.seed)
+        truth = simulate_walk(
+            opts.path,
+            opts.duration_s,
+            rate_hz=1000.0,
+            speed_mps=opts.speed_mps,
+            seed=opts.seed,
+            initial_still_s=opts.initial_still_s,
+        )
     if opts.miscalibrated:
         temp = warm_up_c(truth.t_s, start_c=32.0, end_c=42.0, time_constant_s=120.0)
         acc, gyr = miscalibrated_signals(
@@ -372,6 +387,7 @@ def _shoe_demo(opts: DemoOptions) -> int:
         )
     servers = emulated_servers(opts, truths, cfg)
     extra = {"command": "footnav demo", "emulator": f"{opts.path} {opts.grade} axes {opts.axes}"}
+    extra["feet_coupling"] = opts.feet_coupling  # a two-feet replay couples the feet as the demo did
     capture = open_capture(cfg, session_id, enabled=opts.capture, extra=extra)
     status = StatusLine(feet=feet)
     nav_config = cfg.nav_config()
@@ -387,7 +403,7 @@ def _shoe_demo(opts: DemoOptions) -> int:
     for run in runs:
         foot_sinks(run, views, status, two_feet=two, put_timeout_s=put_timeout_s)
         if opts.collect is not None:
-            run.sinks.append(opts.collect(run.foot))
+            run.add_collector(opts.collect(run.foot))
         if views is not None and isinstance(run.navigator, DualNavigator):
             run.sinks.append(dual_view_sink(run.navigator, views, run.foot))
         if capture is not None:
@@ -404,13 +420,21 @@ def _shoe_demo(opts: DemoOptions) -> int:
                 )
             )
     server_of = dict(zip(feet, servers, strict=True))
+    lockstep = lockstep_for(
+        {run.foot: run.navigator for run in runs},
+        opts.feet_coupling,
+        max_lead_s=LOCKSTEP_MAX_LEAD_S if opts.realtime == 1.0 else None,  # faster: the emulator waits
+        log_event=getattr(views, "log_event", None),
+        notice=notice,
+    )
 
     async def session(run: FootRun) -> None:
         server = server_of[run.foot]
         await run_device_session(
             UnitAddress("serial", server.port),
-            run.navigator,
+            run.navigator if lockstep is None else lockstep.port_for(run.foot),
             run.pipeline_sinks(),
+            lead_in=run.lead_in_sink(),
             expect_samples=truth.t_s.size,
             source_done=server.finished.is_set,
             status=status.foot(run.foot),
@@ -431,7 +455,7 @@ def _shoe_demo(opts: DemoOptions) -> int:
         with contextlib.ExitStack() as stack:
             for server in servers:
                 stack.enter_context(server)
-            asyncio.run(run_feet(runs, session))
+            asyncio.run(run_feet(runs, session, lockstep))
     except KeyboardInterrupt:
         interrupted = True
     finally:
@@ -470,6 +494,8 @@ def print_summaries(
             print(prefix + line)
         if handled := input_handling(run.navigator.stats):
             print(f"{prefix}input handling: {handled}")
+        if note := lead_in_note(run.navigator.stats):
+            print(f"{prefix}lead-in: {note.removeprefix(', ')}")
         if isinstance(run.navigator, DualNavigator):
             for line in dual_summary_lines(run.navigator, truths[0][1], truths[0][2], lever):
                 print(prefix + line)

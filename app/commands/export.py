@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from footnav.app.status import input_handling
+from footnav.app.status import input_handling, lead_in_note
 from footnav.device.files.capture import MCAP_MAGIC
 from footnav.device.files.recordings import CsvMapping, Recording, load_recording
 from footnav.device.files.table_csv import write_table_csv
@@ -116,15 +116,6 @@ def navigate_recording(
     stats.rates_reconstructed = sat.reconstructed
     stats.rates_clipped = int(np.count_nonzero(sat.clipped_b))
     return nav, stats
-
-
-def lead_in_note(stats: NavStats) -> str:
-    """What became of the samples before the first still period, as ", ..." for a summary (empty: none)."""
-    backwards = stats.samples_navigated_backwards
-    dropped = stats.samples_before_alignment - backwards
-    notes = [f"{backwards} samples before the first still period navigated backwards from it"] if backwards else []
-    notes += [f"{dropped} samples before the first still period not navigated"] if dropped else []
-    return "".join(f", {n}" for n in notes)
 
 
 CLEARANCE_COLUMNS = ("clearance", "clearance_swing", "floor_z")
@@ -505,4 +496,5 @@ def _replayed_capture(source: Path) -> dict[str, NavBatch]:
         raise KeyboardInterrupt
     if code != 0:
         raise FootnavError(f"{source}: the replay failed; nothing written")
-    return {foot: concat_batches(batches) for foot, batches in got.items() if batches}
+    # a lead-in filled in comes after the estimates it precedes (``footnav.app.session.run_unit_session``)
+    return {foot: concat_batches(sorted(b, key=lambda n: float(n.t_s[0]))) for foot, b in got.items() if b}

@@ -56,6 +56,7 @@ from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
 from footnav.pipeline.dual_imu.navigator import DualNavigator
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.runner import NavSink
+from footnav.pipeline.two_feet.live import LOCKSTEP_MAX_LEAD_S, FeetLockstep, lockstep_for
 from footnav.views.lsl import LslRequest, lsl_feet
 from footnav.views.outputs import SessionViews, open_session_views
 
@@ -120,6 +121,9 @@ class LiveOptions:
         stance detector mode with ToF units (``footnav.pipeline.stance.height_detector.HeightDetectorParams``).
     lsl
         ``--lsl``: stream the estimates on Lab Streaming Layer too (:mod:`footnav.views.lsl`).
+    feet_coupling
+        two feet: coupled by the distance bound, with the relative heading too, or independent
+        (``footnav.pipeline.two_feet.live``: the feet's clocks matched by host time).
     """
 
     ports: dict[str, str]
@@ -138,6 +142,7 @@ class LiveOptions:
     output: str = "auto"
     model: str | None = None
     lsl: LslRequest | None = None
+    feet_coupling: str = "distance"
 
 
 def choose_output(opts: LiveOptions, model: UnitModel) -> str:
@@ -170,12 +175,20 @@ def choose_output(opts: LiveOptions, model: UnitModel) -> str:
 
 
 def stepwise_fallback(
-    run: FootRun, views: SessionViews | None, capture: CaptureWriter | None, *, two_feet: bool
+    run: FootRun,
+    views: SessionViews | None,
+    capture: CaptureWriter | None,
+    *,
+    two_feet: bool,
+    lockstep: FeetLockstep | None = None,
 ) -> Callable[[str], OnboardStepNavigator]:
     """What a foot does when its unit's firmware offers stepwise output only: say so (terminal,
-    recording, capture event, which a replay follows) and show the unit's stepwise dead reckoning."""
+    recording, capture event, which a replay follows) and show the unit's stepwise dead reckoning
+    (out of the feet's ``lockstep``, if they were coupled)."""
 
     def fall_back(reason: str) -> OnboardStepNavigator:
+        if lockstep is not None:
+            lockstep.end(lockstep.side(run.foot))
         text = (f"{run.foot}: " if two_feet else "") + f"{reason}; showing the unit's stepwise dead reckoning"
         notice(text)
         if views is not None:
@@ -252,7 +265,8 @@ async def live_session(opts: LiveOptions) -> int:
     )
     for note in notes:
         print(note, file=sys.stderr)
-    capture = open_capture(cfg, session_id, enabled=opts.capture, extra={"command": " ".join(opts.argv)})
+    extra = {"command": " ".join(opts.argv), "feet_coupling": opts.feet_coupling}  # a two-feet replay's too
+    capture = open_capture(cfg, session_id, enabled=opts.capture, extra=extra)
     status = StatusLine(feet=feet)
     nav_config = cfg.nav_config()
 
@@ -275,7 +289,7 @@ async def live_session(opts: LiveOptions) -> int:
         if views is not None and isinstance(run.navigator, DualNavigator):
             run.sinks.append(dual_view_sink(run.navigator, views, run.foot))
         if opts.collect is not None:
-            run.sinks.append(opts.collect(run.foot))
+            run.add_collector(opts.collect(run.foot))
         if capture is not None:
             run.tap = capture.add_unit(
                 unit_header(
@@ -293,12 +307,20 @@ async def live_session(opts: LiveOptions) -> int:
                 )
             )
     probing = opts.output == "auto" and opts.model is None  # 2014 firmware: its stepwise output instead
+    lockstep = lockstep_for(
+        {run.foot: run.navigator for run in runs},
+        opts.feet_coupling,
+        max_lead_s=LOCKSTEP_MAX_LEAD_S,
+        log_event=getattr(views, "log_event", None),
+        notice=notice,
+    )
 
     async def session(run: FootRun) -> None:
         await run_device_session(
             addresses[run.foot],
-            run.navigator,
+            run.navigator if lockstep is None else lockstep.port_for(run.foot),
             run.pipeline_sinks(),
+            lead_in=run.lead_in_sink(),
             rate_divider_log2=run.rate_divider_log2,
             status=status.foot(run.foot),
             result=run.result,
@@ -315,7 +337,9 @@ async def live_session(opts: LiveOptions) -> int:
             ),
             fuse_imus=fused is not None,
             on_rate=rate_reporter(run, views, two_feet=two_feet),
-            on_stepwise_only=stepwise_fallback(run, views, capture, two_feet=two_feet) if probing else None,
+            on_stepwise_only=stepwise_fallback(run, views, capture, two_feet=two_feet, lockstep=lockstep)
+            if probing
+            else None,
         )
 
     if views is not None:
@@ -324,7 +348,7 @@ async def live_session(opts: LiveOptions) -> int:
     try:
         lsl = open_lsl_outlets(lsl_streams, runs)
         await wait_lsl_consumers_async(lsl, opts.lsl.wait_s if opts.lsl else 0.0)
-        await run_feet(runs, session)
+        await run_feet(runs, session, lockstep)
     finally:
         status.finish()
         finish_capture(capture, runs)

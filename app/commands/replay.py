@@ -16,7 +16,7 @@ import asyncio
 import io
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,7 +38,7 @@ from footnav.app.feet import (
     run_feet,
 )
 from footnav.app.session import CalibrationLookup, run_unit_session, unit_mode
-from footnav.app.status import Progress, StatusLine, input_handling
+from footnav.app.status import Progress, StatusLine, input_handling, lead_in_note
 from footnav.device.files.capture import (
     EXPECTED,
     MCAP_MAGIC,
@@ -52,6 +52,7 @@ from footnav.device.unit import OpenShoeUnit
 from footnav.pipeline.dual_imu.navigator import DualNavigator
 from footnav.pipeline.errors import FootnavError, InputFormatError
 from footnav.pipeline.runner import NavSink
+from footnav.pipeline.two_feet.live import FEET_COUPLINGS, lockstep_for
 from footnav.views.lsl import LslRequest, lsl_feet
 from footnav.views.outputs import open_session_views
 
@@ -112,6 +113,9 @@ class ReplayOptions:
     lsl
         ``--lsl``: the estimates on Lab Streaming Layer too (:mod:`footnav.views.lsl`), each foot
         as from a unit ``replay:<its captured port>``.
+    feet_coupling
+        two feet: as the capture's session did (None: its ``feet_coupling``, coupled by the distance
+        bound in captures that do not say), or ``footnav.pipeline.two_feet.live.FEET_COUPLINGS``.
     """
 
     path: Path
@@ -127,6 +131,7 @@ class ReplayOptions:
     tof: bool = True
     stance: str | None = None
     lsl: LslRequest | None = None
+    feet_coupling: str | None = None
 
 
 def checked_summary(opts: ReplayOptions) -> CaptureSummary:
@@ -234,6 +239,18 @@ def capture_calibration_lookup(summary: CaptureSummary, cfg: Config, foot: str) 
     return CalibrationLookup(find=find, report=report)
 
 
+def captured_coupling(session: Mapping[str, str]) -> str:
+    """How the captured session navigated its two feet (``feet_coupling``; captures before it was kept:
+    coupled by the distance bound, the default since)."""
+    coupling = session.get("feet_coupling", "distance")
+    if coupling not in FEET_COUPLINGS:
+        notice(
+            f"the capture's feet_coupling is {coupling!r}, not one of {', '.join(FEET_COUPLINGS)}: coupled by distance"
+        )
+        return "distance"
+    return coupling
+
+
 def run_replay(opts: ReplayOptions) -> int:
     """Replay a capture; returns the exit code.
 
@@ -315,7 +332,7 @@ def run_replay(opts: ReplayOptions) -> int:
         if views is not None and isinstance(navigator, DualNavigator):
             run.sinks.append(dual_view_sink(navigator, views, foot))
         if opts.collect is not None:
-            run.sinks.append(opts.collect(foot))
+            run.add_collector(opts.collect(foot))
         links[foot] = CaptureReplayLink(
             opts.path,
             foot,
@@ -325,6 +342,12 @@ def run_replay(opts: ReplayOptions) -> int:
             on_progress=progress.update if (progress is not None and k == 0) else None,
         )
         runs.append(run)
+    lockstep = lockstep_for(
+        {run.foot: run.navigator for run in runs},
+        opts.feet_coupling or captured_coupling(info.session),
+        log_event=getattr(views, "log_event", None),
+        notice=notice,
+    )
     ends = {
         foot: next((e.get("samples") for e in events if e.get("event") == "end"), None)
         for foot, events in summary.events.items()
@@ -337,15 +360,15 @@ def run_replay(opts: ReplayOptions) -> int:
             run.health.stats = lambda: unit.stats
         expect = ends.get(run.foot)
         settings = info.units[feet.index(run.foot)].settings
-        rate_divider = int(settings.get("rate_divider_log2", 0))
         fused_mask = settings.get("fused_imu_mask")
         onboard = onboard_of.get(run.foot)
         await run_unit_session(
             unit,
-            run.navigator,
+            run.navigator if lockstep is None else lockstep.port_for(run.foot),
             run.pipeline_sinks(),
+            lead_in=run.lead_in_sink(),
             start=True,  # the same handshake as live: the unit's answers are in the capture
-            rate_divider_log2=rate_divider,
+            rate_divider_log2=int(settings.get("rate_divider_log2", 0)),
             expect_samples=expect if (isinstance(expect, int) and not windowed) else None,
             status=status.foot(run.foot),
             result=run.result,
@@ -366,7 +389,7 @@ def run_replay(opts: ReplayOptions) -> int:
     lsl = None
     try:
         lsl = open_lsl_outlets(lsl_streams, runs, wait_s=opts.lsl.wait_s if opts.lsl else 0.0)
-        asyncio.run(run_feet(runs, session))
+        asyncio.run(run_feet(runs, session, lockstep))
     except KeyboardInterrupt:
         interrupted = True
     finally:
@@ -432,4 +455,5 @@ def print_results(
             f"{prefix}samples navigated: {st.samples_out} of {run.result.samples_received} replayed "
             f"(lost packets: {lost}); distance {status.foot(run.foot).distance_m:.2f} m"
             + (f"; {handled}" if (handled := input_handling(st)) else "")
+            + lead_in_note(st).replace(", ", "; ", 1)
         )

@@ -27,9 +27,11 @@ for k < s, with P the covariance of (x, y, z, ψ). That covariance is the backwa
 away from the still period where the frame is defined, as the forward run's does after it. The causal
 backward run conditions each lead-in estimate on the samples from it to the end of the still period;
 the smoothers run on the reversed samples as on the forward ones. The forward estimates are those of
-the run without the lead-in, bit for bit. A live session cannot see the samples it has not had and
-still counts the lead-in as not navigated. Why this rather than a forward pass from the start:
-docs/design/estimator.md, "A recording that starts in motion".
+the run without the lead-in, bit for bit. A live session (:class:`LiveLeadIn`) keeps the samples
+before its alignment, at most :data:`LEAD_IN_KEEP_S`, and navigates them the same way, with the same
+functions, once its still period has ended: one more batch, earlier than those already shown. Why
+this rather than a forward pass from the start: docs/design/estimator.md, "A recording that starts in
+motion".
 """
 
 from __future__ import annotations
@@ -111,29 +113,87 @@ def navigate_every_sample(
     if forward is None or start == 0:
         return forward, stats
     end = still_period_end(t_s, acc_b_mps2, gyr_b_radps, rate_hz, config, start)
+    assert end is not None  # the recording is complete
     clipped = None if gyr_clipped_b is None else gyr_clipped_b[:end]
-    t_r, acc_r, gyr_r, clipped_r = reverse_time(t_s[:end], acc_b_mps2[:end], gyr_b_radps[:end], clipped)
-    backward, back_stats = run(t_r, acc_r, gyr_r, rate_hz, config, gyr_clipped_b=clipped_r)
-    # backward sample j is reversed sample r0 + j, recording sample end − 1 − r0 − j
-    last = end - 1 - back_stats.samples_before_alignment  # the recording sample of backward sample 0
-    if backward is None or last < start:
+    found = navigate_lead_in(
+        t_s[:end], acc_b_mps2[:end], gyr_b_radps[:end], rate_hz, config, start, forward, run=run, gyr_clipped_b=clipped
+    )
+    if found is None:
         return forward, stats  # it aligned on another still period: the lead-in stays unnavigated
-    lead_in = _onto_forward(backward, last - start, forward, t_s[:start])
+    lead_in, back_stats = found
     for name in COUNTERS:
         setattr(stats, name, getattr(stats, name) + getattr(back_stats, name))
-    stats.samples_navigated_backwards = start
+    stats.samples_navigated_backwards += start
     stats.samples_out += start
     return concat_batches([lead_in, forward]), stats
 
 
-def still_period_end(t_s: F64, acc_b_mps2: F64, gyr_b_radps: F64, rate_hz: float, config: NavConfig, start: int) -> int:
+def navigate_lead_in(
+    t_s: F64,
+    acc_b_mps2: F64,
+    gyr_b_radps: F64,
+    rate_hz: float,
+    config: NavConfig,
+    start: int,
+    forward: NavBatch,
+    *,
+    run: RecordingRun = navigate,
+    gyr_clipped_b: NDArray[np.bool_] | None = None,
+) -> tuple[NavBatch, NavStats] | None:
+    """The lead-in, samples ``[0, start)``, navigated backwards from the still period ``[start, n)``
+    that follows it and moved onto the forward run (module docstring).
+
+    Parameters
+    ----------
+    t_s, acc_b_mps2, gyr_b_radps, rate_hz, config, gyr_clipped_b
+        the lead-in's samples and its still period's, (n,) and (n, 3), as for ``navigator.navigate``;
+        the last one is the still period's last (:func:`still_period_end`).
+    start : int
+        the first sample of the still period, where the forward run aligned.
+    forward : NavBatch
+        the forward run's estimates from sample ``start`` on (its first sample is used).
+    run : RecordingRun
+        the navigation of the reversed samples.
+
+    Returns
+    -------
+    tuple of NavBatch and NavStats, or None
+        the lead-in's ``start`` estimates in time order and the backward run's statistics; None when
+        the backward run aligned on no quiet samples of this still period.
+    """
+    t_r, acc_r, gyr_r, clipped_r = reverse_time(t_s, acc_b_mps2, gyr_b_radps, gyr_clipped_b)
+    backward, back_stats = run(t_r, acc_r, gyr_r, rate_hz, config, gyr_clipped_b=clipped_r)
+    # backward sample j is reversed sample r0 + j, sample n − 1 − r0 − j
+    last = t_s.shape[0] - 1 - back_stats.samples_before_alignment  # the sample of backward sample 0
+    if backward is None or last < start:
+        return None
+    return _onto_forward(backward, last - start, forward, t_s[:start]), back_stats
+
+
+def still_period_end(
+    t_s: F64, acc_b_mps2: F64, gyr_b_radps: F64, rate_hz: float, config: NavConfig, start: int, *, complete: bool = True
+) -> int | None:
     """One past the last sample of the run of quiet samples (the alignment's criterion,
-    ``NavConfig.align_max_rate_radps`` and ``align_max_acc_dev_mps2``) that begins at ``start``."""
+    ``NavConfig.align_max_rate_radps`` and ``align_max_acc_dev_mps2``) that begins at ``start``.
+
+    A sample's flag depends on the samples within one alignment window of it only
+    (``alignment.first_quiet_run``), so the flags are taken on the samples from a window before
+    ``start`` on (cut at a multiple of 64 samples: the same sums, bit for bit). ``complete=False``:
+    the samples are the first ones of a stream that goes on, and the flags of its last window are
+    not yet decided; None while no decided flag after ``start`` is moving.
+    """
     n = t_s.shape[0]
-    batch = ImuBatch(t_s, acc_b_mps2, gyr_b_radps, np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64))
-    quiet = Navigator(config, rate_hz)._quiet(batch)
-    moving = np.flatnonzero(~quiet[start:])
-    return n if moving.size == 0 else start + int(moving[0])
+    navigator = Navigator(config, rate_hz)
+    need = max(2, round(config.align_s * rate_hz))
+    lo = max(0, start - need) // 64 * 64
+    batch = ImuBatch(
+        t_s[lo:], acc_b_mps2[lo:], gyr_b_radps[lo:], np.arange(lo, n, dtype=np.int64), np.zeros(n - lo, np.int64)
+    )
+    quiet = navigator._quiet(batch)[start - lo : n - lo if complete else max(start - lo, n - lo - need)]
+    moving = np.flatnonzero(~quiet)
+    if moving.size:
+        return start + int(moving[0])
+    return n if complete else None
 
 
 def reverse_time(
@@ -199,3 +259,107 @@ def _onto_forward(backward: NavBatch, meet: int, forward: NavBatch, t_s: F64) ->
         step_onsets=None,
         swing_clearance=None,
     )
+
+
+LEAD_IN_KEEP_S = 120.0
+"""A live session keeps at most this much of its samples before the alignment, s (two minutes:
+120 000 samples, about 9 MB, at 1 kHz); earlier ones stay not navigated."""
+LEAD_IN_STILL_S = 10.0
+"""A live session fills its lead-in in at the latest this far into the still period, s: from the
+still period so far, when it lasts longer (the batch path takes the whole of it)."""
+
+
+class LiveLeadIn:
+    """The lead-in of a live session: its samples kept from the start, then navigated backwards
+    (:func:`navigate_lead_in`, the causal filter) once the navigator has aligned and its still
+    period has ended.
+
+    Call :meth:`add` with each batch before the navigator processes it and :meth:`after` with what
+    it returned; each returns the lead-in's estimates once (None otherwise), and :meth:`finish` at the
+    end of the stream (a still period that lasts to the end). The still period's end is decided on
+    the samples a window past it (:func:`still_period_end`), at the latest :data:`LEAD_IN_STILL_S`
+    into it. At most :data:`LEAD_IN_KEEP_S` of samples are kept before the alignment; with all of
+    them kept, the estimates equal those of :func:`navigate_every_sample` on the same samples when
+    the still period is shorter than :data:`LEAD_IN_STILL_S`. The navigator's ``stats`` count the
+    lead-in in ``samples_navigated_backwards`` and ``samples_out``; the backward run's own counts
+    stay apart (``backward_stats``): the navigator rewrites its counters with every batch.
+    """
+
+    def __init__(
+        self, navigator: Navigator, *, keep_s: float = LEAD_IN_KEEP_S, still_s: float = LEAD_IN_STILL_S
+    ) -> None:
+        self.navigator = navigator
+        self.keep_s, self.still_s = keep_s, still_s
+        self.backward_stats: NavStats | None = None
+        self.done = False
+        self._batches: list[ImuBatch] = []
+        self._held = 0
+        self._first = 0  # the session's index of the first sample held
+        self._forward: NavBatch | None = None
+        self._checked = 0  # samples held at the last look for the still period's end
+
+    def add(self, batch: ImuBatch) -> None:
+        """Keep ``batch`` (the samples as the navigator gets them) while the lead-in may need it."""
+        if self.done or len(batch) == 0:
+            return
+        self._batches.append(batch)
+        self._held += len(batch)
+        if self._forward is None:  # not aligned yet: keep the last ``keep_s``
+            keep = round(self.keep_s * self.navigator.rate_hz)
+            while self._held - len(self._batches[0]) >= keep:
+                dropped = self._batches.pop(0)
+                self._held -= len(dropped)
+                self._first += len(dropped)
+
+    def after(self, nav: NavBatch | None) -> NavBatch | None:
+        """The lead-in's estimates if the still period has ended with the samples added so far."""
+        if self.done:
+            return None
+        if self._forward is None:
+            if nav is None or len(nav) == 0:
+                return None
+            self._forward = nav
+            if self.navigator.stats.samples_before_alignment <= self._first:
+                self._close()  # no lead-in, or none of it kept
+                return None
+        need = max(2, round(self.navigator.config.align_s * self.navigator.rate_hz))
+        if self._held - self._checked < need:
+            return None
+        self._checked = self._held
+        return self._fill(complete=False)
+
+    def finish(self) -> NavBatch | None:
+        """The lead-in's estimates at the end of the stream (None: none to fill in)."""
+        if self.done or self._forward is None:
+            self._close()
+            return None
+        return self._fill(complete=True)
+
+    def _fill(self, *, complete: bool) -> NavBatch | None:
+        nav = self.navigator
+        batch = ImuBatch.concat(self._batches)
+        self._batches = [batch]
+        start = nav.stats.samples_before_alignment - self._first
+        end = still_period_end(
+            batch.t_s, batch.acc_b_mps2, batch.gyr_b_radps, nav.rate_hz, nav.config, start, complete=complete
+        )
+        if end is None and self._held - start < round(self.still_s * nav.rate_hz):
+            return None
+        end = end if end is not None else self._held - max(2, round(nav.config.align_s * nav.rate_hz))
+        clipped = None if batch.gyr_clipped_b is None else batch.gyr_clipped_b[:end]
+        assert self._forward is not None
+        found = navigate_lead_in(
+            batch.t_s[:end], batch.acc_b_mps2[:end], batch.gyr_b_radps[:end], nav.rate_hz, nav.config, start,
+            self._forward, gyr_clipped_b=clipped,
+        )  # fmt: skip
+        self._close()
+        if found is None:
+            return None
+        lead_in, self.backward_stats = found
+        nav.stats.samples_navigated_backwards += start
+        nav.stats.samples_out += start
+        return dataclasses.replace(lead_in, host_ns=np.ascontiguousarray(batch.host_ns[:start]))
+
+    def _close(self) -> None:
+        self.done = True
+        self._batches, self._held, self._forward = [], 0, None

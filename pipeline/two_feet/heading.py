@@ -7,9 +7,11 @@ their heading difference in stance is a constant Δ plus the stride-to-stride va
 placement. Prateek, Girisha, Hari and Händel ("Data fusion of dual foot-mounted INS to reduce the
 systematic heading drift", 2013) use this between the feet's filters; the dual-foot heading
 constraints of Zhao et al. and Niu et al. are of the same kind. Here, once in each stance of foot a,
-when it has stood still ``settle_s``, against the other foot b's last stance (ψ the heading of the
-body x axis, atan2(2(wz + xy), 1 − 2(y² + z²)); ψ_a⁻ foot a's previous stance; s = +1 for a the left
-foot, −1 for the right):
+when it has stood still ``settle_s``, against the last stance of the other foot b that began before
+a's (the feet land in turn; feet that settle in one batch are taken in the order they landed, so a
+foot that landed just before the other is not measured against the other's newer stance; ψ the
+heading of the body x axis, atan2(2(wz + xy), 1 − 2(y² + z²)); ψ_a⁻ foot a's previous stance; s = +1
+for a the left foot, −1 for the right):
 
     z = ψ_a − ψ_b − ½ (ψ_a − ψ_a⁻) = s Δ + e,   e ~ N(0, σ_ψ² + m²),   m = ½ |(ψ_a − ψ_a⁻) − (ψ_b − ψ_b⁻)|,
 
@@ -158,10 +160,11 @@ class HeadingCoupler:
         if left.state is None or right.state is None or (est_l is None and est_r is None):
             return
         t = max(float(e.t_s[-1]) for e in (est_l, est_r) if e is not None)
-        for a in (0, 1):
+        settled = [a for a in (0, 1) if self._feet[a].settled(t, self.config.settle_s)]
+        # in the order the feet landed: a foot is measured against the other foot's stance that began
+        # before its own, also when both settle in one batch
+        for a in sorted(settled, key=lambda a: self._feet[a].run_start_s):
             foot, other = self._feet[a], self._feet[1 - a]
-            if not foot.settled(t, self.config.settle_s):
-                continue
             psi_a = _heading(navs[a])
             drift = math.hypot(self.config.drift_rad, self.config.drift_per_turn * foot.turn_to(psi_a))
             if drift > 0.0:

@@ -1,0 +1,388 @@
+"""Two feet coupled while their samples stream in: the lockstep of ``navigate_feet`` for live sessions.
+
+Each foot's samples reach its pipeline on their own (two units, two links, two asyncio tasks), while
+the distance bound (``footnav.pipeline.two_feet.separation``) must see both navigators at one time.
+:class:`FeetLockstep` holds each foot's arriving batches and runs both navigators on the cells
+[t₀ + k·s, t₀ + (k+1)·s) of one time grid (s = ``FootSeparation.step_s``): cell k is navigated, for
+both feet, once both have delivered a sample at or after its end (or ended), and the bound (with the
+relative heading, if asked) is applied after it, exactly as ``navigate_feet`` does on two recordings.
+Estimates then go to each foot's sinks (:meth:`LockstepPort.bind_sinks`, called by the stage runner),
+at most a cell plus the other foot's lag after the samples arrived. The order of the two feet's
+arrivals does not change a bit of the result, so a replay of a capture (its reads at any pace)
+reproduces the live session; ToF and barometer readings keep their place between a foot's IMU batches.
+
+Clocks. Each foot's ``t_s`` is its own session time (its unit's clock from its first sample). With
+``clock="host"`` a foot's time on the shared grid is τ = t + (h₀ − h_ref)/10⁹: h₀ the host receive
+time (ns) of its first IMU batch, h_ref the earliest of the two (a replay carries the captured host
+times, so it finds the same offsets). The match is as good as the first read's latency difference,
+about a read interval (10 ms): a swinging foot moves 4 cm in that, within the margin of R over a
+step. Unit clock drift (tens of ppm: ms per minute) is not followed. ``clock="shared"`` takes the
+``t_s`` as one clock already (two recordings of one logger).
+
+A foot whose data stops (a link stall) would hold the other's estimates back; with ``max_lead_s``
+a cell is navigated for the foot that has data once it is that far ahead of the other, without the
+bound (counted in ``released_cells``), and the late foot's samples are navigated alone until it is
+back on the grid. The bound is not applied in a cell a foot had ended before. All calls come from one
+thread (the stage runner's event loop; the navigators run there, not in executors), so nothing is
+locked.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Literal, TypeAlias
+
+from footnav.pipeline.aiding.baro import PressureBatch
+from footnav.pipeline.aiding.tof_types import RangeBatch
+from footnav.pipeline.nav_types import NavBatch, concat_batches
+from footnav.pipeline.navigation.navigator import Navigator, NavStats
+from footnav.pipeline.samples import ImuBatch
+from footnav.pipeline.two_feet.heading import HeadingCoupler, RelativeHeading
+from footnav.pipeline.two_feet.separation import FootSeparation, apply_separation
+
+Item: TypeAlias = ImuBatch | RangeBatch | PressureBatch
+NavSink = Callable[[NavBatch], object]
+"""Where a foot's estimates go (``footnav.pipeline.runner.NavSink``, not imported: the runner knows asyncio)."""
+
+
+FEET_COUPLINGS = ("distance", "distance+heading", "independent")
+"""How a session's two feet are navigated: the distance bound (the default), with the relative heading
+(``--couple-heading``), or each on its own (``--independent-feet``); kept in the capture's session
+record (``feet_coupling``) so that a replay does the same."""
+
+
+def coupling_bound(coupling: str) -> FootSeparation | None:
+    """The bound for a :data:`FEET_COUPLINGS` name (None: independent feet)."""
+    if coupling not in FEET_COUPLINGS:
+        raise ValueError(f"unknown feet coupling {coupling!r}; one of {', '.join(FEET_COUPLINGS)}")
+    if coupling == "independent":
+        return None
+    return FootSeparation(heading=RelativeHeading() if coupling == "distance+heading" else None)
+
+
+def coupling_refusal(navigators: Sequence[object]) -> str | None:
+    """Why these feet cannot be coupled (None: they can): two feet, each navigated by footnav's causal
+    single-IMU :class:`Navigator`. Not the step-smoothing navigator (its passes re-filter each step
+    without the bound's updates), the dual-IMU board's, or a unit's own INS or steps."""
+    if len(navigators) != 2:
+        return "one foot"
+    if any(type(n) is not Navigator for n in navigators):
+        return (
+            "the feet are coupled only with footnav's single-IMU filter: not with --step-smoothing, a dual-IMU "
+            "board or --mode ins/steps"
+        )
+    return None
+
+
+LOCKSTEP_MAX_LEAD_S = 1.0
+"""A live session's ``max_lead_s``: a stalled foot holds the other's estimates back at most this much
+of its data, s (a replay waits: the other foot's data is in the capture)."""
+FEET = ("left", "right")
+"""The feet a session couples, by the names its feet have."""
+
+
+def lockstep_for(
+    navigators: dict[str, object],
+    coupling: str,
+    *,
+    max_lead_s: float | None = None,
+    log_event: Callable[..., object] | None = None,
+    notice: Callable[[str], None] | None = None,
+) -> FeetLockstep | None:
+    """A session's lockstep for its feet's navigators (foot name -> navigator), host-time matched;
+    None for one foot, ``coupling="independent"``, or navigators that cannot be coupled (``notice`` is
+    told why). ``log_event(text, t_s=t_s)`` is told each correction (t_s on the left foot's clock; e.g.
+    ``footnav.views.outputs.SessionViews.log_event``)."""
+    bound = coupling_bound(coupling)
+    if bound is None or tuple(navigators) != FEET:
+        return None
+    navs = [navigators[f] for f in FEET]
+    if (why := coupling_refusal(navs)) is not None:
+        if notice is not None:
+            notice(f"the two feet are navigated independently: {why}")
+        return None
+
+    def told(t_s: float, d_m: float) -> None:
+        if log_event is not None:
+            log_event(f"feet {d_m:.2f} m apart, over the {bound.max_m:g} m bound: both tracks corrected", t_s=t_s)
+
+    left, right = (n for n in navs if isinstance(n, Navigator))
+    return FeetLockstep(left, right, bound, max_lead_s=max_lead_s, on_correction=told)
+
+
+@dataclass
+class _Foot:
+    """One foot's side of the lockstep: its navigator, what arrived and is not navigated yet (in
+    arrival order), and where its clock sits on the grid."""
+
+    nav: Navigator
+    items: deque[Item] = field(default_factory=deque)
+    sinks: Sequence[NavSink] = ()
+    out: list[NavBatch] = field(default_factory=list)
+    host0_ns: int | None = None
+    first_t_s: float = math.nan
+    last_t_s: float = -math.inf
+    offset_s: float | None = None
+    ended: bool = False
+
+    @property
+    def reach(self) -> float:
+        """τ of the latest sample received (−∞ before the first, or before the foot is placed)."""
+        return -math.inf if self.offset_s is None else self.last_t_s + self.offset_s
+
+
+class FeetLockstep:
+    """Two navigators in lockstep on one time grid, coupled by the distance bound (module docstring).
+
+    Parameters
+    ----------
+    left, right : Navigator
+        The feet's navigators (each also used on its own by the session: stats, ToF counts).
+    bound : FootSeparation
+        R, its noise, the grid step and the start positions; ``bound.heading`` adds the relative heading.
+    clock : {"host", "shared"}
+        How the feet's times are matched (module docstring).
+    max_lead_s : float, optional
+        Navigate a foot alone once its data is this far ahead of the other's, s (None: wait, as a
+        replay does).
+    on_correction : callable, optional
+        Told ``(τ, distance before)`` at each correction (τ on the left foot's clock, s; m).
+
+    Attributes
+    ----------
+    corrections, distance_before_m
+        when (end of the cell, τ s) the bound was violated and applied, and the distance before, m.
+    released_cells
+        cells navigated without the bound because a foot's data lagged by more than ``max_lead_s``.
+    heading : HeadingCoupler or None
+        the relative heading's record (its ``times_s``), with ``bound.heading``.
+    """
+
+    def __init__(
+        self,
+        left: Navigator,
+        right: Navigator,
+        bound: FootSeparation,
+        *,
+        clock: Literal["host", "shared"] = "host",
+        max_lead_s: float | None = None,
+        on_correction: Callable[[float, float], None] | None = None,
+    ) -> None:
+        self.bound = bound
+        self.clock = clock
+        self.max_lead_s = max_lead_s
+        self.on_correction = on_correction
+        self._feet = (_Foot(left), _Foot(right))
+        self._ports = (LockstepPort(self, 0), LockstepPort(self, 1))
+        self.heading = None if bound.heading is None else HeadingCoupler(bound.heading)
+        self._t0: float | None = None
+        self._ref_ns = 0
+        self._k = 0
+        self.corrections: list[float] = []
+        self.distance_before_m: list[float] = []
+        self.released_cells = 0
+
+    def port(self, foot: int) -> LockstepPort:
+        """What foot 0 (left) or 1 (right)'s pipeline drives in place of its navigator."""
+        return self._ports[foot]
+
+    def port_for(self, foot: str) -> LockstepPort:
+        """:meth:`port` by the foot's name."""
+        return self._ports[self.side(foot)]
+
+    @staticmethod
+    def side(foot: str) -> int:
+        """0 for the ``left`` foot, 1 for the ``right``."""
+        return FEET.index(foot)
+
+    def end(self, foot: int) -> None:
+        """Foot ``foot`` will deliver nothing more (its stream ended, failed or changed navigator): the
+        other foot goes on alone after its last sample. Idempotent."""
+        if not self._feet[foot].ended:
+            self._feet[foot].ended = True
+            self._advance()
+
+    def summary(self) -> str:
+        """One line for the end of a session: how often the bound acted."""
+        released = f"; {self.released_cells * self.bound.step_s:.1f} s navigated apart (a foot's data late)"
+        heading = "" if self.heading is None else f", {len(self.heading.times_s)} relative heading updates"
+        return (
+            f"feet coupled: {len(self.corrections)} corrections of the distance bound (R = {self.bound.max_m:g} m)"
+            + heading
+            + (released if self.released_cells else "")
+        )
+
+    def drained(self, foot: int) -> bool:
+        """Whether everything foot ``foot`` delivered has been navigated and handed to its sinks."""
+        f = self._feet[foot]
+        return not f.items and not f.out
+
+    def _receive(self, foot: int, item: Item) -> None:
+        f = self._feet[foot]
+        if f.ended:
+            raise RuntimeError("a foot fed after its end")
+        f.items.append(item)
+        if isinstance(item, ImuBatch) and len(item):
+            if f.host0_ns is None:
+                f.host0_ns, f.first_t_s = int(item.host_ns[0]), float(item.t_s[0])
+                self._offset(f)
+            f.last_t_s = float(item.t_s[-1])
+        self._advance()
+
+    def _offset(self, f: _Foot) -> None:
+        """Place a foot on the grid once the grid exists."""
+        if self._t0 is not None and f.host0_ns is not None and f.offset_s is None:
+            f.offset_s = 0.0 if self.clock == "shared" else (f.host0_ns - self._ref_ns) / 1e9
+
+    def _place(self) -> bool:
+        """Fix the grid (t₀ and the host-time reference) once both feet have data (or one has ended,
+        or is ``max_lead_s`` into its data alone); False while it cannot be fixed."""
+        if self._t0 is not None:
+            return True
+        started = [f for f in self._feet if f.host0_ns is not None]
+        if not started:
+            return False
+        waiting = [f for f in self._feet if f.host0_ns is None and not f.ended]
+        if waiting:
+            lead = max(f.last_t_s - f.first_t_s for f in started)
+            if self.max_lead_s is None or lead <= self.max_lead_s:
+                return False
+        self._ref_ns = min(f.host0_ns for f in started if f.host0_ns is not None)
+        self._t0 = math.inf
+        for f in started:
+            self._offset(f)
+            assert f.offset_s is not None
+            self._t0 = min(self._t0, f.first_t_s + f.offset_s)
+        return True
+
+    def _edge(self, k: int) -> float:
+        assert self._t0 is not None
+        return self._t0 + self.bound.step_s * k  # as navigate_feet's t0 + step·arange
+
+    def _advance(self) -> None:
+        """Navigate every cell both feet allow, apply the bound after each, hand the estimates on."""
+        if not self._place():
+            return
+        feet = self._feet
+        while True:
+            e0, e1 = self._edge(self._k), self._edge(self._k + 1)
+            for f in feet:  # samples before the cell (a foot back from a lag, or placed late): alone
+                self._feed(f, e0)
+            if all(f.ended and not f.items for f in feet):
+                break
+            ready = [f.ended or f.reach >= e1 for f in feet]
+            released = not all(ready)
+            if released and not self._lead_release(ready):
+                break
+            latest = [self._feed(f, e1) for f in feet]
+            if released:
+                self.released_cells += 1
+            elif all(f.reach >= e0 for f in feet):
+                self._couple(latest, e1)
+            self._k += 1
+        for f in feet:
+            if f.out:
+                nav = concat_batches(f.out)
+                f.out.clear()
+                for sink in f.sinks:
+                    sink(nav)
+
+    def _lead_release(self, ready: list[bool]) -> bool:
+        """Whether the ready foot is ``max_lead_s`` ahead of the other (which then has no say in the cell)."""
+        if self.max_lead_s is None or not any(ready):
+            return False
+        a, b = (self._feet[0], self._feet[1]) if ready[0] else (self._feet[1], self._feet[0])
+        lag_from = b.reach if b.offset_s is not None else self._edge(0)
+        return a.reach - lag_from > self.max_lead_s
+
+    def _couple(self, latest: list[NavBatch | None], t_cell_end: float) -> None:
+        left, right = self._feet[0].nav, self._feet[1].nav
+        if self.heading is not None:
+            self.heading.after_batch(left, latest[0], right, latest[1])
+        d = apply_separation(left, right, self.bound)
+        if math.isfinite(d):
+            self.corrections.append(t_cell_end)
+            self.distance_before_m.append(d)
+            if self.on_correction is not None:
+                self.on_correction(t_cell_end - (self._feet[0].offset_s or 0.0), d)
+
+    def _feed(self, f: _Foot, until: float) -> NavBatch | None:
+        """Navigate the foot's held samples with τ < ``until`` and the readings that arrived among them;
+        the estimates (joined), or None."""
+        made: list[NavBatch] = []
+        while f.items:
+            item = f.items[0]
+            if f.offset_s is None and not (f.ended and (not isinstance(item, ImuBatch) or len(item) == 0)):
+                break  # not on the grid yet (an ended foot that never sent a sample: its readings go on)
+            if not isinstance(item, ImuBatch):
+                f.items.popleft()
+                if isinstance(item, RangeBatch):
+                    f.nav.add_ranges(item)
+                else:
+                    f.nav.add_pressure(item)
+                continue
+            if len(item) == 0:
+                f.items.popleft()
+                continue
+            assert f.offset_s is not None  # a foot with samples is placed once the grid is
+            n = int((item.t_s + f.offset_s < until).sum())  # time stamps ascend within a batch
+            if n == 0:
+                break
+            if n == len(item):
+                f.items.popleft()
+                part = item
+            else:
+                part, f.items[0] = item.select(slice(0, n)), item.select(slice(n, len(item)))
+            est = f.nav.process(part)
+            if est is not None:
+                made.append(est)
+            if n < len(item):
+                break
+        f.out.extend(made)
+        return concat_batches(made) if made else None
+
+
+class LockstepPort:
+    """One foot's door into a :class:`FeetLockstep`: what the stage runner drives in place of the foot's
+    navigator (``footnav.pipeline.runner.BatchNavigator``, ranges and pressure too). ``process`` returns
+    None: the estimates go to the sinks given to :meth:`bind_sinks` when the lockstep has made them."""
+
+    def __init__(self, lockstep: FeetLockstep, foot: int) -> None:
+        self._lockstep = lockstep
+        self._foot = foot
+
+    @property
+    def navigator(self) -> Navigator:
+        return self._lockstep._feet[self._foot].nav
+
+    @property
+    def rate_hz(self) -> float:
+        return self.navigator.rate_hz
+
+    @rate_hz.setter
+    def rate_hz(self, rate_hz: float) -> None:
+        self.navigator.retime(rate_hz)
+
+    @property
+    def stats(self) -> NavStats:
+        return self.navigator.stats
+
+    def retime(self, rate_hz: float) -> None:
+        self.navigator.retime(rate_hz)
+
+    def bind_sinks(self, sinks: Sequence[NavSink]) -> None:
+        """Where this foot's estimates go (the runner's sinks)."""
+        self._lockstep._feet[self._foot].sinks = list(sinks)
+
+    def process(self, batch: ImuBatch) -> NavBatch | None:
+        self._lockstep._receive(self._foot, batch)
+        return None
+
+    def add_ranges(self, batch: RangeBatch) -> None:
+        self._lockstep._receive(self._foot, batch)
+
+    def add_pressure(self, batch: PressureBatch) -> None:
+        self._lockstep._receive(self._foot, batch)

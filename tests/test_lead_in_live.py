@@ -1,0 +1,213 @@
+"""A live session that starts in motion: its lead-in kept, navigated backwards once the navigator has
+aligned and its still period has ended (``footnav.pipeline.navigation.lead_in.LiveLeadIn``), and handed
+to the views as one more batch; the same estimates as the batch path's, the forward ones untouched."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyarrow.compute as pc
+import pytest
+from footnav.app import read_recording
+from footnav.app.commands.demo import DemoOptions, demo_config, run_demo
+from footnav.app.commands.export import run_export
+from footnav.app.commands.replay import ReplayOptions, run_replay
+from footnav.app.config import defaults
+from footnav.device.emulator.motion.gait import simulate_walk
+from footnav.device.emulator.sensors.imu_errors import corrupt
+from footnav.pipeline.nav_types import NavBatch, concat_batches
+from footnav.pipeline.navigation.lead_in import LiveLeadIn, navigate_every_sample
+from footnav.pipeline.navigation.navigator import NavConfig, Navigator
+from footnav.pipeline.navigation.profiles import get_profile
+from footnav.pipeline.samples import ImuBatch
+from rerun.chunk import RrdReader
+
+RATE_HZ = 1000.0
+CONFIG = NavConfig(profile=get_profile("mpu6500x4"))
+ESTIMATES = ("t_s", "pos_n_m", "vel_n_mps", "quat_nb_wxyz", "pos_cov_n_m2", "cov_pos_yaw", "stance",
+             "detector_stat", "detector_threshold", "clearance_m")  # fmt: skip
+
+
+def assert_same(a: NavBatch, b: NavBatch) -> None:
+    assert len(a) == len(b)
+    for name in ESTIMATES:
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)  # bit for bit
+
+
+@pytest.fixture(scope="module")
+def walk_rest_walk() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """8 strides from mid-motion, a rest of about 7 s, then a second walk: the first still period lies
+    between the two walks (the foot stands level at rest, so the body-frame signals join)."""
+    first = simulate_walk("rectangle", 14.0, rate_hz=RATE_HZ, seed=2, initial_still_s=0.0, max_strides=8)
+    second = simulate_walk("rectangle", 10.0, rate_hz=RATE_HZ, seed=5, initial_still_s=1.5)
+    acc, gyr, _ = corrupt(
+        np.vstack([first.acc_b_mps2, second.acc_b_mps2]),
+        np.vstack([first.gyr_b_radps, second.gyr_b_radps]),
+        RATE_HZ,
+        "mpu6500x4",
+        seed=3,
+    )
+    return np.arange(acc.shape[0]) / RATE_HZ, acc, gyr
+
+
+def stream(
+    t: np.ndarray, acc: np.ndarray, gyr: np.ndarray, **kw: float
+) -> tuple[NavBatch, list[tuple[int, NavBatch]], Navigator]:
+    """The samples through a navigator in batches of 10, as a session gives them; the forward estimates,
+    and each lead-in with the number of samples given when it came."""
+    nav = Navigator(CONFIG, RATE_HZ)
+    fill = LiveLeadIn(nav, **kw)
+    forward, lead_ins = [], []
+    for a in range(0, t.size, 10):
+        k = np.arange(a, min(t.size, a + 10))
+        batch = ImuBatch(t[k], acc[k], gyr[k], k.astype(np.int64), np.full(k.size, 1000 + a, np.int64))
+        fill.add(batch)
+        out = nav.process(batch)
+        if out is not None:
+            forward.append(out)
+        if (lead_in := fill.after(out)) is not None:
+            lead_ins.append((int(k[-1]) + 1, lead_in))
+    if (lead_in := fill.finish()) is not None:
+        lead_ins.append((t.size, lead_in))
+    return concat_batches(forward), lead_ins, nav
+
+
+def test_the_lead_in_is_filled_in_once_the_still_period_ends(walk_rest_walk) -> None:  # type: ignore[no-untyped-def]
+    """Measured: 8232 samples of lead-in (the 8 strides), the still period to sample 15322, filled in
+    at sample 16230 (0.9 s later: a window of 0.5 s to decide the last quiet flag, and a look every
+    0.5 s): the batch path's estimates, bit for bit; the forward ones as without it."""
+    t, acc, gyr = walk_rest_walk
+    whole, stats = navigate_every_sample(t, acc, gyr, RATE_HZ, CONFIG)
+    assert whole is not None and len(whole) == t.size
+    s = stats.samples_before_alignment
+    assert s == stats.samples_navigated_backwards > 8000
+    forward, lead_ins, nav = stream(t, acc, gyr)
+    ((given, lead_in),) = lead_ins
+    assert 15322 + 500 <= given <= 15322 + 1500  # after the still period, not at the end of the stream
+    assert_same(lead_in, _part(whole, 0, s))
+    np.testing.assert_array_equal(lead_in.host_ns, 1000 + np.arange(s) // 10 * 10)  # the samples' own
+    assert_same(forward, _part(whole, s, t.size))
+    alone = Navigator(CONFIG, RATE_HZ).process(ImuBatch(t, acc, gyr, np.arange(t.size), np.zeros(t.size, np.int64)))
+    assert alone is not None
+    assert_same(forward, alone)
+    assert nav.stats.samples_navigated_backwards == s and nav.stats.samples_out == t.size
+
+
+def test_a_still_period_that_lasts_is_not_waited_for(walk_rest_walk) -> None:  # type: ignore[no-untyped-def]
+    """``still_s`` 1 s: filled in 1.0 s into the 7 s still period, from that second; measured 6.5 mm at
+    most from the batch path's lead-in (which takes all 7 s) over its 11.8 m, whose 1σ at its first
+    sample is 2.5 cm."""
+    t, acc, gyr = walk_rest_walk
+    whole, stats = navigate_every_sample(t, acc, gyr, RATE_HZ, CONFIG)
+    assert whole is not None
+    s = stats.samples_before_alignment
+    _, lead_ins, _ = stream(t, acc, gyr, still_s=1.0)
+    ((given, lead_in),) = lead_ins
+    assert s + 1000 <= given <= s + 1100
+    err = np.linalg.norm(lead_in.pos_n_m - whole.pos_n_m[:s], axis=1)
+    assert 0 < err.max() < 0.01 < math.sqrt(np.trace(whole.pos_cov_n_m2[0]))
+
+
+def test_samples_beyond_the_bound_stay_not_navigated(walk_rest_walk) -> None:  # type: ignore[no-untyped-def]
+    """``keep_s`` 3 s: only the samples of the last 3 s before the alignment are kept, and those of the
+    lead-in among them (2492) navigated, the same as the
+    batch path's (to 1e-9 m: the reversed clock starts elsewhere); the rest are counted as not navigated."""
+    t, acc, gyr = walk_rest_walk
+    whole, stats = navigate_every_sample(t, acc, gyr, RATE_HZ, CONFIG)
+    assert whole is not None
+    s = stats.samples_before_alignment
+    _, lead_ins, nav = stream(t, acc, gyr, keep_s=3.0)
+    ((_, lead_in),) = lead_ins
+    kept = len(lead_in)
+    # the 3 s before the navigator aligned hold the still period's first half second and more
+    assert 2000 < kept < 3000 - 500 and nav.stats.samples_navigated_backwards == kept
+    assert nav.stats.samples_before_alignment == s
+    np.testing.assert_array_equal(lead_in.t_s, t[s - kept : s])
+    np.testing.assert_allclose(lead_in.pos_n_m, whole.pos_n_m[s - kept : s], rtol=0, atol=1e-9)
+
+
+def _part(nav: NavBatch, a: int, b: int) -> NavBatch:
+    """Samples ``[a, b)`` of ``nav``'s per-sample estimates."""
+    return dataclasses.replace(nav, **{f: getattr(nav, f)[a:b] for f in ESTIMATES if getattr(nav, f) is not None})
+
+
+def _footnav(*args: str) -> subprocess.CompletedProcess[str]:
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    return subprocess.run(
+        [sys.executable, "-m", "footnav.app", *args], capture_output=True, text=True, timeout=300, env=env, check=False
+    )
+
+
+def test_a_demo_that_starts_in_motion_through_the_session_and_its_replay(tmp_path: Path) -> None:
+    """The emulated shoe walks from its first sample (20 s, 14.6 s of strides, then it stands): the
+    still period lasts to the end of the stream, where the lead-in is filled in. It reaches the
+    session's sinks and its .rrd, equals the batch path's on the samples the session navigated, and a
+    replay of the capture (in process, and ``footnav replay --save``) gives it again."""
+    cfg = defaults()
+    cfg.set("session.sessions_dir", str(tmp_path), "test")
+    got: dict[str, list[NavBatch]] = {}
+    rrd = tmp_path / "live.rrd"
+    opts = DemoOptions(
+        duration_s=20.0,
+        viewer=False,
+        save=rrd,
+        realtime=math.inf,
+        config=cfg,
+        initial_still_s=0.0,
+        collect=lambda foot: got.setdefault(foot, []).append,
+    )
+    assert run_demo(opts) == 0
+    *forward_batches, lead_in = got["foot"]
+    forward = concat_batches(forward_batches)
+    assert float(lead_in.t_s[-1]) < float(forward.t_s[0])  # one batch, after the ones it precedes
+    assert len(lead_in) + len(forward) == 20_000
+    assert lead_in.step_onsets is not None and lead_in.step_onsets.size > 10  # its steps found
+    (capture,) = tmp_path.glob("*.mcap")
+    rec = read_recording(capture)
+    whole, stats = navigate_every_sample(
+        rec.t_s, rec.acc_b_mps2, rec.gyr_b_radps, rec.rate_hz, demo_config(DemoOptions(config=defaults())).nav_config()
+    )
+    assert whole is not None and stats.samples_navigated_backwards == len(lead_in) > 14_000
+    assert_same(lead_in, _part(whole, 0, len(lead_in)))
+    assert_same(forward, _part(whole, len(lead_in), len(whole)))
+    # the replay in process: the same batches
+    again: dict[str, list[NavBatch]] = {}
+    replay = ReplayOptions(
+        path=capture, config=defaults(), viewer=False, collect=lambda f: again.setdefault(f, []).append
+    )
+    assert run_replay(replay) == 0
+    *replayed, replayed_lead_in = again["foot"]
+    assert_same(replayed_lead_in, lead_in)
+    assert_same(concat_batches(replayed), forward)
+    # exported, in time order
+    table = tmp_path / "track.csv"
+    run_export(capture, table, fmt=None, columns=None, profile=None, smooth=None)
+    rows = np.loadtxt(table, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3))
+    assert rows.shape[0] == 20_000
+    np.testing.assert_allclose(rows[:, 0], np.concatenate([lead_in.t_s, forward.t_s]), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(rows[: len(lead_in), 1:], lead_in.pos_n_m, rtol=0, atol=1e-6)
+    # the command line: the summary counts it, the recording holds every sample at its time
+    saved = tmp_path / "replay.rrd"
+    proc = _footnav("replay", str(capture), "--no-viewer", "--save", str(saved))
+    assert proc.returncode == 0, proc.stderr
+    m = re.search(r"navigated: (\d+) of (\d+) replayed .*distance ([\d.]+) m; (\d+) samples before the", proc.stdout)
+    assert m and int(m[1]) == int(m[2]) == 20_000 and int(m[4]) == len(lead_in), proc.stdout
+    assert 23.0 < float(m[3]) < 27.0  # the lead-in's strides counted: 25.8 m of track, 23.6 m walked
+    for path in (rrd, saved):
+        track = (
+            RrdReader(path).stream().collect().reader(index="imu_time", contents=["/world/foot/track"]).to_arrow_table()
+        )
+        t_ns = np.asarray(track["imu_time"].cast("int64").to_numpy())
+        pos = np.asarray(pc.list_flatten(pc.list_flatten(track["/world/foot/track:Points3D:positions"])).to_numpy())
+        pos = pos.reshape(-1, 3)
+        assert track.num_rows == 20_000
+        order = np.argsort(t_ns, kind="stable")
+        np.testing.assert_allclose(t_ns[order][: len(lead_in)], lead_in.t_s * 1e9, rtol=0, atol=1.0)  # ns
+        np.testing.assert_array_equal(pos[order][: len(lead_in)], lead_in.pos_n_m.astype(np.float32))
