@@ -62,10 +62,17 @@ def _export(args: argparse.Namespace) -> int:
 def _export_feet(args: argparse.Namespace) -> int:
     from footnav.app.api.feet import export_pair
 
+    if not (args.left or args.right):
+        raise FootnavError(
+            "--independent-feet and --couple-heading are for --left FILE --right FILE (a two-feet capture is "
+            "exported with its feet coupled as its session had them)"
+        )
     if not (args.left and args.right) or args.input:
         raise FootnavError("two feet are exported as --left FILE --right FILE, without other inputs")
     if args.smooth:
-        raise FootnavError("--smooth applies to one foot's recording; two feet are navigated with the causal filter")
+        raise FootnavError(
+            "--smooth and --step-smoothing apply to one foot's recording; two feet are navigated with the causal filter"
+        )
     if args.jobs is not None or args.scheduler:
         raise FootnavError("--jobs and --scheduler are for a folder or several files; two feet run in this process")
     print(

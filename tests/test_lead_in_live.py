@@ -22,11 +22,14 @@ from footnav.app.commands.replay import ReplayOptions, run_replay
 from footnav.app.config import defaults
 from footnav.device.emulator.motion.gait import simulate_walk
 from footnav.device.emulator.sensors.imu_errors import corrupt
+from footnav.pipeline.gait.events import GaitEventTracker
 from footnav.pipeline.nav_types import NavBatch, concat_batches
 from footnav.pipeline.navigation.lead_in import LiveLeadIn, navigate_every_sample
 from footnav.pipeline.navigation.navigator import NavConfig, Navigator
 from footnav.pipeline.navigation.profiles import get_profile
 from footnav.pipeline.samples import ImuBatch
+from footnav.views.plan import DecimatedLine
+from footnav.views.strides import StrideTable
 from rerun.chunk import RrdReader
 
 RATE_HZ = 1000.0
@@ -58,24 +61,29 @@ def walk_rest_walk() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def stream(
-    t: np.ndarray, acc: np.ndarray, gyr: np.ndarray, **kw: float
+    t: np.ndarray, acc: np.ndarray, gyr: np.ndarray, arrivals: list[NavBatch] | None = None, **kw: float
 ) -> tuple[NavBatch, list[tuple[int, NavBatch]], Navigator]:
     """The samples through a navigator in batches of 10, as a session gives them; the forward estimates,
-    and each lead-in with the number of samples given when it came."""
+    and each lead-in with the number of samples given when it came (``arrivals``: every batch, in the
+    order a session's sinks get them: a lead-in before the batch whose navigation brought it)."""
     nav = Navigator(CONFIG, RATE_HZ)
     fill = LiveLeadIn(nav, **kw)
     forward, lead_ins = [], []
+    arrivals = [] if arrivals is None else arrivals
     for a in range(0, t.size, 10):
         k = np.arange(a, min(t.size, a + 10))
         batch = ImuBatch(t[k], acc[k], gyr[k], k.astype(np.int64), np.full(k.size, 1000 + a, np.int64))
         fill.add(batch)
         out = nav.process(batch)
-        if out is not None:
-            forward.append(out)
         if (lead_in := fill.after(out)) is not None:
             lead_ins.append((int(k[-1]) + 1, lead_in))
+            arrivals.append(lead_in)
+        if out is not None:
+            forward.append(out)
+            arrivals.append(out)
     if (lead_in := fill.finish()) is not None:
         lead_ins.append((t.size, lead_in))
+        arrivals.append(lead_in)
     return concat_batches(forward), lead_ins, nav
 
 
@@ -131,6 +139,33 @@ def test_samples_beyond_the_bound_stay_not_navigated(walk_rest_walk) -> None:  #
     assert nav.stats.samples_before_alignment == s
     np.testing.assert_array_equal(lead_in.t_s, t[s - kept : s])
     np.testing.assert_allclose(lead_in.pos_n_m, whole.pos_n_m[s - kept : s], rtol=0, atol=1e-9)
+
+
+def test_the_views_draw_the_lead_in_and_count_its_strides(walk_rest_walk) -> None:  # type: ignore[no-untyped-def]
+    """The lead-in reaches the views after the forward batches of the first 0.9 s past the still period:
+    the decimated track line (3D and plan) takes it in front of them, and the stride table adds its
+    strides before theirs. Measured: 7 lead-in strides and 6 after the rest, each 1.44 m (before: the
+    line began at the alignment and the table held the 6 only)."""
+    t, acc, gyr = walk_rest_walk
+    arrivals: list[NavBatch] = []
+    forward, ((_, lead_in),), _ = stream(t, acc, gyr, arrivals)
+    steps, lead_in_steps = GaitEventTracker(), GaitEventTracker()  # as FootRun.lead_in_sink: one of its own
+    shown = [lead_in_steps.annotate(b) if b is lead_in else steps.annotate(b) for b in arrivals]
+    line, table = DecimatedLine([]), StrideTable(("foot",))
+    for nav in shown:
+        line.add(nav.t_s, nav.pos_n_m.astype(np.float32))
+        table.update("foot", nav)
+    assert line.points[0] == tuple(float(v) for v in lead_in.pos_n_m[0].astype(np.float32))
+    assert line.points[-1] in {tuple(float(v) for v in p) for p in forward.pos_n_m[-100:].astype(np.float32)}
+    assert len(line.points) == 241  # 0.1 s apart over 24.1 s: the lead-in's 8.2 s, the rest's and the walk's
+    k = next(i for i, b in enumerate(arrivals) if b is lead_in)
+    alone = [StrideTable(("foot",)) for _ in range(2)]
+    for i, nav in enumerate(shown):
+        alone[i != k].update("foot", nav)
+    before, after = (a.strides("foot") for a in alone)
+    assert len(before) == 7 and len(after) == 6
+    assert table.strides("foot") == before + after
+    assert all(1.3 < s.length_m < 1.6 for s in table.strides("foot"))
 
 
 def _part(nav: NavBatch, a: int, b: int) -> NavBatch:

@@ -311,3 +311,21 @@ def test_export_of_a_pair_writes_navigate_pairs_tracks(
 def test_export_refuses_half_a_pair(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["export", "--left", "a.csv", "-o", str(tmp_path / "t.csv")]) != 0
     assert "--left FILE --right FILE" in capsys.readouterr().err
+
+
+def test_the_feet_flags_are_refused_where_there_is_no_pair(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--independent-feet`` on a one-foot capture's replay, and on an export without ``--left``/``--right``:
+    refused with a message that says what they are for (before: the replay ignored it, the export
+    talked of "other inputs")."""
+    cfg = defaults()
+    cfg.set("session.sessions_dir", str(tmp_path), "test")
+    opts = DemoOptions(duration_s=5.0, viewer=False, realtime=math.inf, config=cfg)
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert run_demo(opts) == 0
+    (capture,) = tmp_path.glob("*.mcap")
+    capsys.readouterr()
+    assert main(["replay", str(capture), "--no-viewer", "--independent-feet"]) == 2
+    assert f"are for two feet; {capture} holds one" in capsys.readouterr().err
+    assert main(["export", str(capture), "-o", str(tmp_path / "t.csv"), "--independent-feet"]) == 2
+    assert "are for --left FILE --right FILE" in capsys.readouterr().err
+    assert not (tmp_path / "t.csv").exists()

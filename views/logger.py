@@ -510,10 +510,10 @@ class RerunLogger:
         if gait is not None:
             rec.send_columns(gait[0], indexes=[gait[1]], columns=gait[2])
         self._last_stance[foot] = bool(nav.stance[-1])
+        self._last_t_s = max(float(arrays.t_s[-1]), self._lines[foot].last_t_s)  # a lead-in filled in ends before
         if self._strides.update(foot, nav):
-            rec.set_time(TIMELINE, duration=float(arrays.t_s[-1]))
+            rec.set_time(TIMELINE, duration=self._last_t_s)
             rec.log(STRIDES, rr.TextDocument(self._strides.markdown(), media_type=rr.MediaType.MARKDOWN))
-        self._last_t_s = float(arrays.t_s[-1])
 
     def _send_events(self, events: list[_Event]) -> None:
         default_t = self._last_t_s if self._last_t_s is not None else 0.0

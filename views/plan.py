@@ -50,20 +50,40 @@ class DecimatedLine:
     logged_t_s: float = -np.inf
     logged_wall: float = -np.inf
     last_t_s: float = -np.inf
+    first_t_s: float = np.inf
     dirty: bool = False
 
     def add(self, t_s: NDArray[np.float64], pos: NDArray[np.float32]) -> None:
-        """Take the samples (n,) at (n, 3) positions that fall on the line's spacing."""
-        for k in range(t_s.shape[0]):
-            if t_s[k] >= self.next_t_s:
-                self.points.append((float(pos[k, 0]), float(pos[k, 1]), float(pos[k, 2])))
-                self.next_t_s = float(t_s[k]) + self.spacing_s
-                self.dirty = True
-        if t_s.shape[0]:
+        """Take the samples (n,) at (n, 3) positions that fall on the line's spacing. Samples that all
+        precede the line's first point (a lead-in filled in: ``footnav.pipeline.navigation.lead_in``)
+        go before it, at the same spacing."""
+        if t_s.shape[0] == 0:
+            return
+        if self.points and float(t_s[-1]) < self.first_t_s:
+            earlier, _ = self._spaced(t_s, pos, -np.inf)
+            self.points[:0] = earlier
+            self.first_t_s = float(t_s[0])
+        else:
+            later, self.next_t_s = self._spaced(t_s, pos, self.next_t_s)
+            if later and not self.points:
+                self.first_t_s = float(t_s[0])
+            self.points += later
             self.last_t_s = float(t_s[-1])
-        if len(self.points) > LINE_MAX_POINTS:
+        while len(self.points) > LINE_MAX_POINTS:
             self.points = self.points[::2]
             self.spacing_s *= 2.0
+
+    def _spaced(
+        self, t_s: NDArray[np.float64], pos: NDArray[np.float32], next_t_s: float
+    ) -> tuple[list[tuple[float, float, float]], float]:
+        """The samples from ``next_t_s`` on that are :attr:`spacing_s` apart, and the time of the next."""
+        taken: list[tuple[float, float, float]] = []
+        for k in range(t_s.shape[0]):
+            if t_s[k] >= next_t_s:
+                taken.append((float(pos[k, 0]), float(pos[k, 1]), float(pos[k, 2])))
+                next_t_s = float(t_s[k]) + self.spacing_s
+        self.dirty = self.dirty or bool(taken)
+        return taken, next_t_s
 
 
 def to_plan(xy_n_m: NDArray[np.floating]) -> F32:

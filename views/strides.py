@@ -42,6 +42,8 @@ class _Foot:
     """The samples from the last footfall on, while ``open``."""
     open: bool = False
     """A stride runs from the last footfall (not once it spans more than ``MAX_STRIDE_S``)."""
+    latest_t_s: float = -np.inf
+    """The time of the latest sample taken, s."""
 
 
 class StrideTable:
@@ -51,8 +53,22 @@ class StrideTable:
         self._feet = {f: _Foot() for f in feet}
 
     def update(self, foot: str, nav: NavBatch) -> bool:
-        """Take a batch (its ``step_onsets`` filled); True when it ended a stride."""
+        """Take a batch (its ``step_onsets`` filled); True when it ended a stride. A batch that ends before
+        the latest sample taken (a lead-in filled in: ``footnav.pipeline.navigation.lead_in``) adds its own
+        strides before the others."""
         state = self._feet[foot]
+        if len(nav) and float(nav.t_s[-1]) < state.latest_t_s:
+            earlier = _Foot()
+            added = self._take(earlier, nav)
+            state.strides[:0] = earlier.strides
+            return added
+        if len(nav):
+            state.latest_t_s = float(nav.t_s[-1])
+        return self._take(state, nav)
+
+    @classmethod
+    def _take(cls, state: _Foot, nav: NavBatch) -> bool:
+        """The batch's footfalls and samples into ``state``; True when it ended a stride."""
         onsets = nav.step_onsets if nav.step_onsets is not None else np.zeros(0, dtype=np.intp)
         start = 0
         added = False
@@ -61,7 +77,7 @@ class StrideTable:
             if state.last_t_s is not None and t - state.last_t_s < MIN_STRIDE_S:
                 continue
             if state.open:
-                added |= self._add_stride(state, [*state.since, _samples(nav, start, k + 1)])
+                added |= cls._add_stride(state, [*state.since, _samples(nav, start, k + 1)])
             state.last_t_s, state.since, state.open, start = t, [], True, k
         if state.open and state.last_t_s is not None:
             state.since.append(_samples(nav, start, len(nav)))

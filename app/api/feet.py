@@ -15,7 +15,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from footnav.app.commands.export import load_other_recording, recording_config, write_steps_csv, write_track
+from footnav.app.commands.export import (
+    foot_path,
+    load_other_recording,
+    recording_config,
+    write_steps_csv,
+    write_track,
+)
 from footnav.device.files.recordings import Recording
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.navigation.saturation import reconstruct_saturated_rates
@@ -79,11 +85,6 @@ def navigate_pair(
     return result
 
 
-def foot_path(path: Path, foot: str) -> Path:
-    """``<stem>-<foot><suffix>`` beside ``path``: one foot's file of a pair (as a two-feet capture's export)."""
-    return path.with_name(f"{path.stem}-{foot}{path.suffix}")
-
-
 def export_pair(
     left: Path,
     right: Path,
@@ -137,5 +138,9 @@ def export_pair(
             from footnav.app.api.gait_export import export_gait
 
             gait.append(export_gait(nav, foot_path(gait_out, foot), causal_from=0, label=f" {foot}"))
-    how = "independent" if bound is None else f"coupled: {len(result.corrections)} corrections of the distance bound"
+    how = "independent"
+    if bound is not None:  # as the live sessions' FeetLockstep.summary says it
+        how = f"coupled: {len(result.corrections)} corrections of the distance bound" + (
+            "" if bound.heading is None else f", {len(result.heading_updates)} relative heading updates"
+        )
     return f"wrote {'; '.join(written)} (two feet, {how})" + "".join(f"\n{g}" for g in gait)

@@ -465,19 +465,25 @@ def export_capture(
         raise FootnavError(f"{source}: the capture never stood still long enough to align; nothing written")
     written, gait = [], []
     for foot, nav in navs.items():
-        path = out if len(navs) == 1 else out.with_name(f"{out.stem}-{foot}{out.suffix}")
+        path = out if len(navs) == 1 else foot_path(out, foot)
         write_track(nav, path, out_format)
         written.append(f"{len(nav)} rows to {path}{' with clearance' if nav.floor_z_m is not None else ''}")
         if steps_out is not None:
-            spath = steps_out if len(navs) == 1 else steps_out.with_name(f"{steps_out.stem}-{foot}{steps_out.suffix}")
+            spath = steps_out if len(navs) == 1 else foot_path(steps_out, foot)
             written.append(write_steps_csv(nav, spath, with_covariance=not smooth))
         if gait_out is not None:
             from footnav.app.api.gait_export import export_gait
 
-            gpath = gait_out if len(navs) == 1 else gait_out.with_name(f"{gait_out.stem}-{foot}{gait_out.suffix}")
+            gpath = gait_out if len(navs) == 1 else foot_path(gait_out, foot)
             label = f" {foot}" if len(navs) > 1 else ""
             gait.append(export_gait(nav, gpath, causal_from=None if smooth else 0, label=label))
     return f"wrote {'; '.join(written)} (footnav capture, {how})" + "".join(f"\n{g}" for g in gait)
+
+
+def foot_path(path: Path, foot: str) -> Path:
+    """``<stem>-<foot><suffix>`` beside ``path``: one foot's file of two (a two-feet capture's export, or
+    ``export --left --right``)."""
+    return path.with_name(f"{path.stem}-{foot}{path.suffix}")
 
 
 def _replayed_capture(source: Path) -> dict[str, NavBatch]:

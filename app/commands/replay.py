@@ -141,6 +141,8 @@ def checked_summary(opts: ReplayOptions) -> CaptureSummary:
     ------
     InputFormatError
         the file is not a footnav capture, declares no unit, holds no data, or is a calibration.
+    FootnavError
+        ``feet_coupling`` is given for a capture of one foot.
     """
     detect_format(opts.path)
     summary = summarize_capture(opts.path)
@@ -155,6 +157,8 @@ def checked_summary(opts: ReplayOptions) -> CaptureSummary:
             f"{opts.path} is a calibration procedure (raw IMU output); refit it with "
             f"`footnav calibrate --capture {opts.path}`"
         )
+    if opts.feet_coupling is not None and len(info.units) != 2:
+        raise FootnavError(f"--independent-feet and --couple-heading are for two feet; {opts.path} holds one")
     for warning in info.warnings:
         notice(warning)
     if summary.gaps:

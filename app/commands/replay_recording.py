@@ -20,9 +20,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from footnav.app.commands.export import lead_in_note, load_other_recording, navigate_recording
+from footnav.app.commands.export import load_other_recording, navigate_recording
 from footnav.app.feet import check_lsl, close_lsl_outlets, notice, open_lsl_outlets
-from footnav.app.status import input_handling
+from footnav.app.status import input_handling, lead_in_note
 from footnav.device.files.recordings import Recording
 from footnav.pipeline.gait.events import GaitEventTracker
 from footnav.pipeline.metrics import ate, path_length_m

@@ -9,7 +9,8 @@ relative heading, if asked) is applied after it, exactly as ``navigate_feet`` do
 Estimates then go to each foot's sinks (:meth:`LockstepPort.bind_sinks`, called by the stage runner),
 at most a cell plus the other foot's lag after the samples arrived. The order of the two feet's
 arrivals does not change a bit of the result, so a replay of a capture (its reads at any pace)
-reproduces the live session; ToF and barometer readings keep their place between a foot's IMU batches.
+reproduces the live session unless the session released cells (below); ToF and barometer readings
+keep their place between a foot's IMU batches.
 
 Clocks. Each foot's ``t_s`` is its own session time (its unit's clock from its first sample). With
 ``clock="host"`` a foot's time on the shared grid is τ = t + (h₀ − h_ref)/10⁹: h₀ the host receive
@@ -22,9 +23,10 @@ step. Unit clock drift (tens of ppm: ms per minute) is not followed. ``clock="sh
 A foot whose data stops (a link stall) would hold the other's estimates back; with ``max_lead_s``
 a cell is navigated for the foot that has data once it is that far ahead of the other, without the
 bound (counted in ``released_cells``), and the late foot's samples are navigated alone until it is
-back on the grid. The bound is not applied in a cell a foot had ended before. All calls come from one
-thread (the stage runner's event loop; the navigators run there, not in executors), so nothing is
-locked.
+back on the grid. Which cells are released depends on when the data arrived, which a capture does not
+keep: its replay waits (``max_lead_s=None``) and couples them. The bound is not applied in a cell a foot
+had ended before. All calls come from one thread (the stage runner's event loop; the navigators run
+there, not in executors), so nothing is locked.
 """
 
 from __future__ import annotations
@@ -361,10 +363,6 @@ class LockstepPort:
     @property
     def rate_hz(self) -> float:
         return self.navigator.rate_hz
-
-    @rate_hz.setter
-    def rate_hz(self, rate_hz: float) -> None:
-        self.navigator.retime(rate_hz)
 
     @property
     def stats(self) -> NavStats:
