@@ -432,7 +432,7 @@ async def run_feet(
 ) -> None:
     """Run every foot's session at once; a foot whose unit fails is reported and the others carry on.
     With ``lockstep`` (``footnav.pipeline.two_feet.live.lockstep_for``) a foot's session ends once its
-    last estimates are out.
+    last estimates are out (its lead-in, if it was filled in at the end, with them).
 
     Raises
     ------

@@ -31,6 +31,7 @@ from footnav.pipeline.navigation.lead_in import LiveLeadIn
 from footnav.pipeline.navigation.navigator import Navigator
 from footnav.pipeline.runner import BatchNavigator, NavSink, run_pipeline
 from footnav.pipeline.samples import ImuBatch
+from footnav.pipeline.two_feet.live import LockstepPort
 
 if TYPE_CHECKING:
     from footnav.app.calibration_store import StoredCalibration
@@ -102,10 +103,17 @@ def _filling_in(
 ) -> _FillingIn | None:
     """The navigator with its lead-in handed to ``lead_in`` (shown within a replay's ``window``), if
     it is a single-IMU one fed IMU samples (the calibrated output, or ``fuse_imus``) and ``lead_in``
-    is given."""
-    if lead_in is None or not (mode is None or fuse_imus) or not isinstance(navigator, Navigator):
+    is given. A coupled foot (``footnav.pipeline.two_feet.live.LockstepPort``) is told to fill its
+    lead-in in itself, as its lockstep navigates it (and at the foot's end): None is returned."""
+    if lead_in is None or not (mode is None or fuse_imus):
         return None
-    return _FillingIn(navigator, lead_in if window is None else _shown_since(window[0], [lead_in]))
+    shown = lead_in if window is None else _shown_since(window[0], [lead_in])
+    if isinstance(navigator, LockstepPort):
+        navigator.fill_lead_in(shown)
+        return None
+    if not isinstance(navigator, Navigator):
+        return None
+    return _FillingIn(navigator, shown)
 
 
 async def _navigate(
@@ -430,8 +438,8 @@ async def run_unit_session(
     navigator (``footnav.app.stream.fused_imus``); ``on_stepwise_only(reason)``: the firmware offers
     stepwise output only (2014 MIMU22BT): start that instead, with the navigator this returns (for
     ``footnav.device.onboard.OnboardStepNavigator``), rather than fail; ``lead_in``: where the
-    samples before the alignment go once navigated backwards (:class:`_FillingIn`; a single-IMU
-    navigator's IMU samples only). Closes the unit."""
+    samples before the alignment go once navigated backwards (:class:`_FillingIn`, or a coupled foot's
+    lockstep; a single-IMU navigator's IMU samples only). Closes the unit."""
     result = result if result is not None else SerialSessionResult()
     name = unit.link.name
 

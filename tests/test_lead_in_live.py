@@ -4,7 +4,9 @@ to the views as one more batch; the same estimates as the batch path's, the forw
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import io
 import math
 import os
 import re
@@ -16,11 +18,14 @@ import numpy as np
 import pyarrow.compute as pc
 import pytest
 from footnav.app import read_recording
+from footnav.app.commands import demo
 from footnav.app.commands.demo import DemoOptions, demo_config, run_demo
 from footnav.app.commands.export import run_export
-from footnav.app.commands.replay import ReplayOptions, run_replay
+from footnav.app.commands.replay import ReplayOptions, checked_summary, run_replay
+from footnav.app.commands.smooth_capture import captured_samples
 from footnav.app.config import defaults
-from footnav.device.emulator.motion.gait import simulate_walk
+from footnav.app.feet import FOOT_START_OFFSET_M
+from footnav.device.emulator.motion.gait import FOOT_SIDE_M, GaitTruth, simulate_walk
 from footnav.device.emulator.sensors.imu_errors import corrupt
 from footnav.pipeline.gait.events import GaitEventTracker
 from footnav.pipeline.nav_types import NavBatch, concat_batches
@@ -246,3 +251,81 @@ def test_a_demo_that_starts_in_motion_through_the_session_and_its_replay(tmp_pat
         order = np.argsort(t_ns, kind="stable")
         np.testing.assert_allclose(t_ns[order][: len(lead_in)], lead_in.t_s * 1e9, rtol=0, atol=1.0)  # ns
         np.testing.assert_array_equal(pos[order][: len(lead_in)], lead_in.pos_n_m.astype(np.float32))
+
+
+def _walking_from_the_first_sample(
+    path: str, duration_s: float, rate_hz: float = 1000.0, speed_mps: float = 1.4, *, seed: int = 0
+) -> tuple[GaitTruth, GaitTruth]:
+    """``two_feet_walks`` without its first 3 s of standing: both feet swing from the first sample (the
+    right a half stride ahead), walk as many strides as fit and stand from then on."""
+    left = simulate_walk(path, duration_s, rate_hz, speed_mps, seed=seed, lateral_m=FOOT_SIDE_M, initial_still_s=0.0)
+    right = simulate_walk(path, duration_s, rate_hz, speed_mps, seed=seed + 1, lateral_m=-FOOT_SIDE_M,
+                          initial_still_s=0.0, half_stride_ahead=True)  # fmt: skip
+    return left, right
+
+
+def _rrd_track(path: Path, foot: str) -> tuple[np.ndarray, np.ndarray]:
+    """A foot's track in a recording: its times (ns) and positions (float32, drawn offset), in time order."""
+    track = (
+        RrdReader(path).stream().collect().reader(index="imu_time", contents=[f"/world/{foot}/track"]).to_arrow_table()
+    )
+    t_ns = np.asarray(track["imu_time"].cast("int64").to_numpy())
+    pos = np.asarray(pc.list_flatten(pc.list_flatten(track[f"/world/{foot}/track:Points3D:positions"])).to_numpy())
+    order = np.argsort(t_ns, kind="stable")
+    return t_ns[order], pos.reshape(-1, 3)[order]
+
+
+def test_two_coupled_feet_that_start_in_motion_fill_in_their_lead_ins(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two emulated units walk from their first sample (20 s: about 18 s of strides, then they stand)
+    through the real serial path, coupled by the distance bound: each foot's lockstep fills its lead-in
+    in at the end of its stream, alone. Each reaches the foot's sinks and the .rrd, equals bit for bit
+    ``navigate_every_sample`` on that foot's captured samples alone, and so does each forward track (the
+    bound never acted: the feet stand side by side from the alignment on); the summary counts them, and
+    a replay of the capture gives them again. (``DemoOptions.initial_still_s`` is one foot's: the
+    demo's two-feet walks are swapped for :func:`_walking_from_the_first_sample`.)"""
+    monkeypatch.setattr(demo, "two_feet_walks", _walking_from_the_first_sample)
+    cfg = defaults()
+    cfg.set("session.sessions_dir", str(tmp_path), "test")
+    got: dict[str, list[NavBatch]] = {}
+    rrd = tmp_path / "live.rrd"
+    opts = DemoOptions(duration_s=20.0, feet=2, viewer=False, save=rrd, realtime=math.inf, config=cfg,
+                       collect=lambda foot: got.setdefault(foot, []).append)  # fmt: skip
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        assert run_demo(opts) == 0
+    assert "feet coupled: 0 corrections" in printed.getvalue()
+    (capture,) = tmp_path.glob("*.mcap")
+    collected = captured_samples(capture, checked_summary(ReplayOptions(path=capture, config=defaults())), defaults())
+    nav_config = demo_config(DemoOptions(config=defaults(), feet=2)).nav_config()
+    lead_ins: dict[str, NavBatch] = {}
+    for foot in ("left", "right"):
+        *forward_batches, lead_in = got[foot]  # the lead-in after the forward batches: the end of the stream
+        lead_ins[foot] = lead_in
+        forward = concat_batches(forward_batches)
+        assert float(lead_in.t_s[-1]) < float(forward.t_s[0]) and len(lead_in) + len(forward) == 20_000
+        assert lead_in.step_onsets is not None and lead_in.step_onsets.size > 10  # its steps found
+        samples = ImuBatch.concat(collected[foot].batches)
+        whole, stats = navigate_every_sample(
+            samples.t_s, samples.acc_b_mps2, samples.gyr_b_radps, collected[foot].rate_hz, nav_config
+        )
+        assert whole is not None and stats.samples_navigated_backwards == len(lead_in) > 17_000
+        assert_same(lead_in, _part(whole, 0, len(lead_in)))
+        assert_same(forward, _part(whole, len(lead_in), len(whole)))
+        assert f"{foot}: lead-in: {len(lead_in)} samples before the first still period navigated backwards" in (
+            printed.getvalue()
+        )
+        t_ns, pos = _rrd_track(rrd, foot)
+        assert t_ns.size == 20_000
+        np.testing.assert_allclose(t_ns[: len(lead_in)], lead_in.t_s * 1e9, rtol=0, atol=1.0)  # ns
+        shown = lead_in.pos_n_m + np.asarray(FOOT_START_OFFSET_M[foot])  # drawn side by side
+        np.testing.assert_allclose(pos[: len(lead_in)], shown, rtol=0, atol=2e-6)  # float32 in the recording
+    # the replay in process: the same lead-ins
+    again: dict[str, list[NavBatch]] = {}
+    replay = ReplayOptions(path=capture, config=defaults(), viewer=False,
+                           collect=lambda f: again.setdefault(f, []).append)  # fmt: skip
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert run_replay(replay) == 0
+    for foot in ("left", "right"):
+        assert_same(again[foot][-1], lead_ins[foot])

@@ -1,9 +1,9 @@
 """Two feet coupled as their samples stream in (``footnav.pipeline.two_feet.live``): the lockstep gives
 ``navigate_feet``'s estimates bit for bit whatever the order and size of the two feet's batches, finds
-the feet's clock offset from their host times, and lets a foot go on alone when the other stops; the
-demo's two emulated units through the real serial path are coupled by it (the recording holds the
-coupled tracks, a replay repeats them), independent feet are each foot's own navigation, and
-``export --left --right`` writes ``navigate_pair``'s two tracks."""
+the feet's clock offset from their host times, fills each foot's lead-in in on its own, and lets a
+foot go on alone when the other stops; the demo's two emulated units through the real serial path are
+coupled by it (the recording holds the coupled tracks, a replay repeats them), independent feet are
+each foot's own navigation, and ``export --left --right`` writes ``navigate_pair``'s two tracks."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import contextlib
 import io
 import math
 import re
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -25,11 +26,12 @@ from footnav.app.commands.replay import ReplayOptions, checked_summary, run_repl
 from footnav.app.commands.smooth_capture import captured_samples
 from footnav.app.config import Config, defaults
 from footnav.app.feet import FOOT_START_OFFSET_M
-from footnav.device.emulator.motion.gait import two_feet_walks
+from footnav.device.emulator.motion.gait import simulate_walk, two_feet_walks
 from footnav.device.emulator.sensors.imu_errors import IMU_GRADES, corrupt
 from footnav.device.files.capture import read_capture_info
 from footnav.device.files.recordings import load_recording
 from footnav.pipeline.nav_types import NavBatch, concat_batches
+from footnav.pipeline.navigation.lead_in import navigate_every_sample
 from footnav.pipeline.navigation.navigator import NavConfig, Navigator
 from footnav.pipeline.samples import ImuBatch
 from footnav.pipeline.smoothing.stepwise import StepSmoothingNavigator
@@ -57,15 +59,17 @@ def _stream(
     host0_ns: tuple[int, int] = (0, 0),
     t_shift_s: tuple[float, float] = (0.0, 0.0),
     stop_after: tuple[float, float] = (np.inf, np.inf),
+    counting: Sequence[Callable[[NavBatch], object]] = (),
 ) -> list[list[NavBatch]]:
     """Feed both feet's samples in random batches (1-120 samples) in a random interleaving, each foot's
     time on its own session clock (``t_shift_s`` subtracted) and its host stamps from ``host0_ns`` on;
-    a foot stops (and is ended) after ``stop_after`` seconds. Returns what each foot's sinks got."""
+    a foot stops (and is ended) after ``stop_after`` seconds. Returns what each foot's sinks got
+    (``counting``: one more sink per foot)."""
     got: list[list[NavBatch]] = [[], []]
     cursors = [0, 0]
     batches = [sig.batch() for sig in feet]
     for i in (0, 1):
-        lockstep.port(i).bind_sinks([got[i].append])
+        lockstep.port(i).bind_sinks([got[i].append, *counting[i : i + 1]])
     ends = [int(np.searchsorted(sig.t_s, sig.t_s[0] + stop)) if np.isfinite(stop) else len(sig.t_s)
             for sig, stop in zip(feet, stop_after, strict=True)]  # fmt: skip
     while any(cursors[i] < ends[i] for i in (0, 1)):
@@ -158,6 +162,70 @@ def test_a_stopped_foot_holds_the_other_back_only_max_lead(figure8: tuple[FootSi
     lock.end(1)
     assert lock.drained(0) and lock.drained(1)
     assert concat_batches(got[0]).t_s[-1] == pytest.approx(11.999)
+
+
+@pytest.fixture(scope="module")
+def walk_then_figure8() -> tuple[FootSignals, FootSignals]:
+    """Each foot walks 6 strides of the rectangle from its first sample and rests (9 s), then the figure
+    eight of :func:`figure8` (its 3 s of standing first): the first still period, 5.5 s, lies between
+    the two walks (the foot stands level at rest, so the body-frame signals join)."""
+    out = []
+    for i, tr in enumerate(two_feet_walks("figure8", 30.0, seed=2)):
+        first = simulate_walk("rectangle", 9.0, seed=7 + i, initial_still_s=0.0, max_strides=6)
+        acc, gyr, _ = corrupt(
+            np.vstack([first.acc_b_mps2, tr.acc_b_mps2]),
+            np.vstack([first.gyr_b_radps, tr.gyr_b_radps]),
+            tr.rate_hz,
+            IMU_GRADES["mpu6500x4"],
+            seed=2 + i,
+            axes="gyro-bias-calibrated",
+        )
+        out.append(FootSignals(np.arange(acc.shape[0]) / tr.rate_hz, acc, gyr, tr.rate_hz))
+    return out[0], out[1]
+
+
+def test_each_coupled_foot_fills_its_lead_in_in_on_its_own(walk_then_figure8: tuple[FootSignals, FootSignals]) -> None:
+    """Both feet start in motion: each foot's lead-in (its 6 strides) is filled in once its still
+    period has ended, mid-stream, equal bit for bit to ``navigate_every_sample`` on that foot's samples
+    alone (the lead-in is not coupled, and it meets the forward track at its first sample, which no
+    correction has touched); the forward estimates stay ``navigate_feet``'s bit for bit, which equal the
+    uncoupled run's up to the bound's first correction and differ after it."""
+    bound = FootSeparation()
+    ref = navigate_feet(walk_then_figure8[0], walk_then_figure8[1], coupling=bound)
+    lock = FeetLockstep(Navigator(NavConfig(), 1000.0), Navigator(NavConfig(), 1000.0), bound, clock="shared")
+    lead_ins: list[list[tuple[int, NavBatch]]] = [[], []]
+    forward_given = [0, 0]
+
+    def lead_in_sink(i: int) -> Callable[[NavBatch], None]:
+        return lambda nav: lead_ins[i].append((forward_given[i], nav))
+
+    lock.port(0).process(walk_then_figure8[0].batch().select(slice(0, 5)))
+    with pytest.raises(RuntimeError, match="only from its first batch"):  # it would miss what came
+        lock.port(0).fill_lead_in(lead_in_sink(0))
+    lock = FeetLockstep(Navigator(NavConfig(), 1000.0), Navigator(NavConfig(), 1000.0), bound, clock="shared")
+    for i in (0, 1):
+        lock.port(i).fill_lead_in(lead_in_sink(i))
+    counted = [lambda nav, i=i: forward_given.__setitem__(i, forward_given[i] + len(nav)) for i in (0, 1)]
+    got = _stream(lock, walk_then_figure8, np.random.default_rng(5), counting=counted)
+    assert len(ref.corrections) > 3 and lock.corrections == ref.corrections
+    first = ref.corrections[0]
+    for i, (sig, want) in enumerate(zip(walk_then_figure8, (ref.left, ref.right), strict=True)):
+        assert want is not None
+        track = concat_batches(got[i])
+        for name in ("t_s", "pos_n_m", "vel_n_mps", "quat_nb_wxyz", "pos_cov_n_m2"):
+            np.testing.assert_array_equal(getattr(track, name), getattr(want, name), name)
+        whole, stats = navigate_every_sample(sig.t_s, sig.acc_b_mps2, sig.gyr_b_radps, sig.rate_hz, NavConfig())
+        assert whole is not None
+        s = stats.samples_before_alignment
+        ((given, lead_in),) = lead_ins[i]
+        assert len(lead_in) == s == lock.port(i).stats.samples_navigated_backwards > 5000
+        assert 0 < given < len(track)  # mid-stream, once the still period had ended
+        for name in ("t_s", "pos_n_m", "vel_n_mps", "quat_nb_wxyz", "pos_cov_n_m2", "cov_pos_yaw", "stance"):
+            np.testing.assert_array_equal(getattr(lead_in, name), getattr(whole, name)[:s], name)
+        before = track.t_s < first  # the estimates the first correction came after
+        assert 1000 < before.sum() < len(track)
+        np.testing.assert_array_equal(track.pos_n_m[before], whole.pos_n_m[s:][before])
+        assert not np.array_equal(track.pos_n_m[~before], whole.pos_n_m[s:][~before])
 
 
 def test_only_two_single_imu_navigators_are_coupled() -> None:

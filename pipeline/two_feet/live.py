@@ -27,6 +27,14 @@ back on the grid. Which cells are released depends on when the data arrived, whi
 keep: its replay waits (``max_lead_s=None``) and couples them. The bound is not applied in a cell a foot
 had ended before. All calls come from one thread (the stage runner's event loop; the navigators run
 there, not in executors), so nothing is locked.
+
+Lead-in. A foot whose walk starts in motion aligns on its first still period; with
+:meth:`LockstepPort.fill_lead_in` its samples before it are kept and navigated backwards once that
+period has ended, by the one-foot path's ``footnav.pipeline.navigation.lead_in.LiveLeadIn`` on the
+foot's own samples: no coupling in the lead-in (the other foot's lead-in is a separate backward run
+in a frame of its own, each moved onto its own foot's forward track at its first sample). The forward
+estimates are those without it, bit for bit, and the lead-in is handed to the foot's lead-in sinks
+among its forward batches, as one more batch earlier than those already given.
 """
 
 from __future__ import annotations
@@ -40,6 +48,7 @@ from typing import Literal, TypeAlias
 from footnav.pipeline.aiding.baro import PressureBatch
 from footnav.pipeline.aiding.tof_types import RangeBatch
 from footnav.pipeline.nav_types import NavBatch, concat_batches
+from footnav.pipeline.navigation.lead_in import LiveLeadIn
 from footnav.pipeline.navigation.navigator import Navigator, NavStats
 from footnav.pipeline.samples import ImuBatch
 from footnav.pipeline.two_feet.heading import HeadingCoupler, RelativeHeading
@@ -118,12 +127,15 @@ def lockstep_for(
 @dataclass
 class _Foot:
     """One foot's side of the lockstep: its navigator, what arrived and is not navigated yet (in
-    arrival order), and where its clock sits on the grid."""
+    arrival order), its estimates not yet handed on (each with True for a lead-in), its lead-in
+    filling, and where its clock sits on the grid."""
 
     nav: Navigator
     items: deque[Item] = field(default_factory=deque)
     sinks: Sequence[NavSink] = ()
-    out: list[NavBatch] = field(default_factory=list)
+    out: list[tuple[NavBatch, bool]] = field(default_factory=list)
+    lead_in: LiveLeadIn | None = None
+    lead_in_sinks: Sequence[NavSink] = ()
     host0_ns: int | None = None
     first_t_s: float = math.nan
     last_t_s: float = -math.inf
@@ -286,11 +298,39 @@ class FeetLockstep:
                 self._couple(latest, e1)
             self._k += 1
         for f in feet:
+            self._finish_lead_in(f)
             if f.out:
-                nav = concat_batches(f.out)
-                f.out.clear()
+                self._hand_on(f)
+
+    @staticmethod
+    def _finish_lead_in(f: _Foot) -> None:
+        """The lead-in of a foot whose still period lasted to its end, once all it delivered is navigated."""
+        if f.lead_in is None or f.lead_in.done or not f.ended or f.items:
+            return
+        if (lead_in := f.lead_in.finish()) is not None:
+            f.out.append((lead_in, True))
+
+    @staticmethod
+    def _hand_on(f: _Foot) -> None:
+        """The foot's estimates to its sinks (consecutive forward batches joined) and each lead-in to its
+        lead-in sinks, in the order they were made."""
+        out, f.out = f.out, []
+        forward: list[NavBatch] = []
+        for nav, is_lead_in in out:
+            if not is_lead_in:
+                forward.append(nav)
+                continue
+            if forward:
+                joined = concat_batches(forward)
+                forward.clear()
                 for sink in f.sinks:
-                    sink(nav)
+                    sink(joined)
+            for sink in f.lead_in_sinks:
+                sink(nav)
+        if forward:
+            joined = concat_batches(forward)
+            for sink in f.sinks:
+                sink(joined)
 
     def _lead_release(self, ready: list[bool]) -> bool:
         """Whether the ready foot is ``max_lead_s`` ahead of the other (which then has no say in the cell)."""
@@ -312,8 +352,8 @@ class FeetLockstep:
                 self.on_correction(t_cell_end - (self._feet[0].offset_s or 0.0), d)
 
     def _feed(self, f: _Foot, until: float) -> NavBatch | None:
-        """Navigate the foot's held samples with τ < ``until`` and the readings that arrived among them;
-        the estimates (joined), or None."""
+        """Navigate the foot's held samples with τ < ``until`` and the readings that arrived among them
+        (its lead-in filling sees each batch, as ``LiveLeadIn`` asks); the estimates (joined), or None."""
         made: list[NavBatch] = []
         while f.items:
             item = f.items[0]
@@ -338,12 +378,16 @@ class FeetLockstep:
                 part = item
             else:
                 part, f.items[0] = item.select(slice(0, n)), item.select(slice(n, len(item)))
+            if f.lead_in is not None:
+                f.lead_in.add(part)
             est = f.nav.process(part)
+            if f.lead_in is not None and (lead_in := f.lead_in.after(est)) is not None:
+                f.out.append((lead_in, True))  # before the batch that brought it, as for one foot
             if est is not None:
                 made.append(est)
+                f.out.append((est, False))
             if n < len(item):
                 break
-        f.out.extend(made)
         return concat_batches(made) if made else None
 
 
@@ -374,6 +418,21 @@ class LockstepPort:
     def bind_sinks(self, sinks: Sequence[NavSink]) -> None:
         """Where this foot's estimates go (the runner's sinks)."""
         self._lockstep._feet[self._foot].sinks = list(sinks)
+
+    def fill_lead_in(self, sink: NavSink) -> None:
+        """Fill this foot's lead-in in (module docstring): its samples before the alignment, navigated
+        backwards on their own once its still period has ended, go to ``sink`` (once, at most); call
+        it before the foot's first batch.
+
+        Raises
+        ------
+        RuntimeError
+            the foot has received data already (its lead-in would miss it).
+        """
+        f = self._lockstep._feet[self._foot]
+        if f.items or f.host0_ns is not None or f.ended:
+            raise RuntimeError("a foot's lead-in is filled in only from its first batch")
+        f.lead_in, f.lead_in_sinks = LiveLeadIn(f.nav), [sink]
 
     def process(self, batch: ImuBatch) -> NavBatch | None:
         self._lockstep._receive(self._foot, batch)
