@@ -195,7 +195,7 @@ def test_headless_screenshot_of_the_default_blueprint(demo20: Path, tmp_path: Pa
     from PIL import Image
 
     shot = tmp_path / "shot.png"
-    screenshot(demo20, shot, end_s=20.0, timeout_s=60.0)
+    screenshot(demo20, shot, end_s=20.0, timeout_s=300.0)
     painted = painted_views(np.asarray(Image.open(shot).convert("RGB")).astype(np.int32))
     assert painted["plan"] > 0.002 and painted["scene"] > 0.0005, painted  # the tracks are drawn
     assert min(painted["clearance"], painted["speed"], painted["detector"]) > 0.005, painted  # series lines
@@ -248,7 +248,7 @@ def test_every_kind_of_recording_paints_every_view(case: str, tmp_path: Path, sh
     proc = _footnav(*argv, "--no-viewer", "--save", str(rrd))
     assert proc.returncode == 0, proc.stderr
     shot = tmp_path / "shot.png"
-    screenshot(rrd, shot, timeout_s=60.0)
+    screenshot(rrd, shot, timeout_s=300.0)
     painted = painted_views(np.asarray(Image.open(shot).convert("RGB")).astype(np.int32))
     assert painted["plan"] > 0.001 and painted["scene"] > 0.0005, (
         painted

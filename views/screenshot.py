@@ -101,7 +101,13 @@ def screenshot(
                 raise ScreenshotError(f"the viewer did not load {rrd} within {timeout_s:.0f} s")
             time.sleep(0.3)
         time.sleep(settle_s)
-        client.save_screenshot(str(png))
+        while True:  # the viewer's own deadline per request is short for software rendering on a busy machine
+            try:
+                client.save_screenshot(str(png))
+                break
+            except TimeoutError:
+                if time.monotonic() > deadline:
+                    raise ScreenshotError(f"the viewer did not render {rrd} within {timeout_s:.0f} s") from None
     finally:
         viewer.terminate()
         try:
