@@ -14,6 +14,7 @@ decides. Source: ``hcarlsso/openshoe-framework:src/external_interfaces/external_
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -50,7 +51,10 @@ class PacketRun(NamedTuple):
     numbers: NDArray[np.int64]
     """(m,) package numbers, uint16 as sent."""
     payloads: NDArray[np.uint8]
-    """(m, N) payload bytes (a read-only view of one buffer)."""
+    """(m, N) payload bytes (a view of one copy of the bytes read)."""
+    heads: NDArray[np.int64] | None = None
+    """(m,) the first four payload bytes of each packet as a big-endian uint32 (the 64 MHz time stamp of
+    every output that carries one), when N >= 4."""
 
     def __len__(self) -> int:
         return int(self.numbers.shape[0])
@@ -190,30 +194,62 @@ def data_numbers(frames: list[Frame | PacketRun]) -> tuple[NDArray[np.int64], in
 
 def _run_at(buf: bytearray, start: int, length: int) -> PacketRun | None:
     """The valid packets of payload ``length`` back to back from ``buf[start]``, if there are at least
-    :data:`_MIN_RUN` of them; else None (the caller goes on byte by byte)."""
+    :data:`_MIN_RUN` of them; else None (the caller goes on byte by byte).
+
+    Each window takes one matrix product with :func:`_run_weights`: per packet a code that is valid only for
+    a valid packet, its number and its head."""
     stride = length + 6
     available = (len(buf) - start) // stride
-    numbers: list[NDArray[np.int64]] = []
+    weights, valid_code = _run_weights(length)
+    fields: list[NDArray[np.int64]] = []
     payloads: list[NDArray[np.uint8]] = []
     taken = 0
     while taken < available:
         k = min(_RUN_WINDOW, available - taken)
         at = start + taken * stride
-        rows = np.frombuffer(bytes(buf[at : at + k * stride]), dtype=np.uint8).reshape(k, stride)
-        chk = rows[:, : length + 4].sum(axis=1, dtype=np.uint32) & 0xFFFF
-        valid = (
-            (rows[:, 0] == PACKET_HEADER)
-            & (rows[:, 3] == length)
-            & (chk == (rows[:, length + 4].astype(np.uint32) << 8 | rows[:, length + 5]))
-        )
-        good = k if bool(valid.all()) else int(np.argmin(valid))
-        numbers.append(rows[:good, 1].astype(np.int64) << 8 | rows[:good, 2])
+        rows = np.frombuffer(buf[at : at + k * stride], dtype=np.uint8).reshape(k, stride)  # a copy of the bytes
+        r = np.dot(rows.astype(np.float64), weights)  # (k, 3): code, number, head; exact in float64
+        code = r[:, 0]
+        if length > _NO_CARRY_LENGTH:  # the byte sum may exceed 2**16 by one carry
+            code = np.where(code == valid_code + _CODE_SCALE * (1 << 16), valid_code, code)
+        valid = code == valid_code
+        good = k if np.count_nonzero(valid) == k else int(np.argmin(valid))
+        fields.append(r[:good, 1:].astype(np.int64))
         payloads.append(rows[:good, 4 : 4 + length])
         taken += good
         if good < k:
             break
     if taken < _MIN_RUN:
         return None
-    if len(numbers) == 1:
-        return PacketRun(numbers[0], payloads[0])
-    return PacketRun(np.concatenate(numbers), np.concatenate(payloads))
+    f = fields[0] if len(fields) == 1 else np.concatenate(fields)
+    return PacketRun(
+        f[:, 0], payloads[0] if len(payloads) == 1 else np.concatenate(payloads), f[:, 1] if length >= 4 else None
+    )
+
+
+_NO_CARRY_LENGTH: Final = 252
+"""Up to this payload length the sum of header and payload bytes, at most (N + 4)·255, is below 2**16."""
+_CODE_SCALE: Final = float(1 << 18)
+"""Weight of the checksum difference in a packet's code: above any header difference (< 2**16)."""
+
+
+@functools.cache
+def _run_weights(length: int) -> tuple[NDArray[np.float64], float]:
+    """Weights (N + 6, 3) that turn the bytes of a packet of payload ``length`` N into its code, number and
+    head, and the code of a valid one.
+
+    code = 2**18·(sum of bytes AA .. last payload byte - checksum) + 256·byte 0 + byte 3, which equals
+    256·0xAA + N exactly when the checksum matches (for N <= :data:`_NO_CARRY_LENGTH`; beyond, the sum
+    may also be the checksum + 2**16) and the header is AA with length N: the checksum term is 0 or at
+    least 2**18 in size, the header term below 2**16. number = 256·byte 1 + byte 2; head = bytes 4..7
+    as a big-endian integer (the first min(N, 4) payload bytes). Every value is an integer below 2**35,
+    exact in float64.
+    """
+    w = np.zeros((length + 6, 3))
+    w[: length + 4, 0] = _CODE_SCALE
+    w[length + 4 :, 0] = (-256.0 * _CODE_SCALE, -_CODE_SCALE)
+    w[(0, 3), 0] += (256.0, 1.0)
+    w[(1, 2), 1] = (256.0, 1.0)
+    head = min(length, 4)
+    w[4 : 4 + head, 2] = 256.0 ** np.arange(head - 1, -1, -1)
+    return w, PACKET_HEADER * 256.0 + length

@@ -74,6 +74,22 @@ def decode_payloads(payloads: bytes | bytearray | memoryview) -> NormalImuArrays
         )
 
 
+def decode_imu_rows(rows: NDArray[np.uint8]) -> NDArray[np.float64]:
+    """The IMU values of m 28-byte payloads held as the rows of ``rows`` (m, 28) (a framer's run: a view
+    of the bytes read): (m, 6) specific force, m/s², then angular rate, rad/s, body frame (the float32
+    values, widened). Their time stamps are :attr:`footnav.device.protocol.framer.PacketRun.heads`.
+
+    Raises
+    ------
+    ValueError
+        the rows are not 28 bytes long.
+    """
+    if rows.ndim != 2 or rows.shape[1] != PAYLOAD_LEN:
+        raise ValueError(f"normal-IMU payloads are {PAYLOAD_LEN} bytes each; got rows of shape {rows.shape}")
+    with np.errstate(invalid="ignore"):  # a signalling NaN (a corrupt float) stays NaN, without a warning
+        return rows[:, 4:].view(">f4").astype(np.float64)
+
+
 def seconds_to_ticks(t_s: NDArray[np.float64], tick0: int) -> NDArray[np.uint32]:
     """Device ticks for sample times ``t_s`` (n,), s, with ``t_s[0]`` at tick ``tick0``, wrapped to uint32."""
     rel = np.rint((np.asarray(t_s, dtype=np.float64) - t_s[0]) * TICK_HZ).astype(np.int64)
@@ -214,10 +230,14 @@ class SharedTickClock:
         raw = np.asarray(ticks, dtype=np.int64)
         if raw.size == 0:
             return np.empty(0, dtype=np.float64)
+        first = int(raw[0])
         if self._last_raw is None:
-            self._last_raw = self._last_total = int(raw[0])
-        steps = (diff_after(self._last_raw, raw) + TICK_WRAP // 2) % TICK_WRAP - TICK_WRAP // 2
-        total = self._last_total + np.cumsum(steps)
+            self._last_raw = self._last_total = first
+        # signed steps modulo 2**32 (differences taken in int32, which wrap), summed on from the last total
+        total = np.empty(raw.size, dtype=np.int64)
+        total[0] = self._last_total + (first - self._last_raw + TICK_WRAP // 2) % TICK_WRAP - TICK_WRAP // 2
+        np.subtract(raw[1:], raw[:-1], out=total[1:], dtype=np.int32)
+        np.add.accumulate(total, out=total)
         self._last_raw = int(raw[-1])
         self._last_total = int(total[-1])
         return total / TICK_HZ

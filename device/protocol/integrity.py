@@ -46,6 +46,8 @@ INS_POS_MAX_M: Final = 1e5
 INS_VEL_MAX_MPS: Final = 50.0
 QUAT_NORM_TOL: Final = 1e-3
 STEP_MAX_M: Final = 5.0
+_TILE_ROWS: Final = 1024
+"""Rows of the bounds kept tiled for the common test (more when a longer run comes)."""
 
 
 class ImuGuard:
@@ -62,6 +64,7 @@ class ImuGuard:
         self._gyr_range = math.inf if gyr_range is None else gyr_range
         self._bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None  # per column: range, step
         self._last: tuple[int, NDArray[np.float64]] | None = None  # the last accepted record, [acc | gyr]
+        self._tiled: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None  # _bounds, row after row
         self.rejected = 0
         """Records rejected so far."""
 
@@ -73,17 +76,16 @@ class ImuGuard:
         n = len(counter)
         a = np.asarray(acc, dtype=np.float64).reshape(n, -1)
         x = np.concatenate((a, np.asarray(gyr, dtype=np.float64).reshape(n, -1)), axis=1)
-        if self._bounds is None or self._bounds[0].shape[0] != x.shape[1]:
-            acc_cols = np.arange(x.shape[1]) < a.shape[1]
-            self._bounds = (
-                np.where(acc_cols, self._acc_range, self._gyr_range),
-                np.where(acc_cols, ACC_STEP_MPS2, GYR_STEP_RADPS),
-            )
-            self._last = None
-        limit, step = self._bounds
-        if n and self._all_near(x, limit, step):
-            self._last = (int(counter[-1]), x[-1])
+        return self.check_rows(counter, x, a.shape[1])
+
+    def check_rows(self, counter: NDArray[np.int64], x: NDArray[np.float64], acc_cols: int) -> NDArray[np.bool_]:
+        """As :meth:`check`, with the records as the rows of ``x`` (n, 2·k·3) float64: their first
+        ``acc_cols`` columns specific force, m/s², the others angular rate, rad/s."""
+        n = len(counter)
+        if self.accepts_all(counter, x, acc_cols):
             return np.ones(n, dtype=np.bool_)
+        assert self._bounds is not None
+        limit, step = self._bounds
         ok: NDArray[np.bool_] = np.asarray((np.abs(x) <= limit).all(axis=1), dtype=np.bool_)  # NaN fails
         prev_rejected: NDArray[np.float64] | None = None
         for i in np.flatnonzero(ok):
@@ -98,14 +100,43 @@ class ImuGuard:
         self.rejected += int(np.count_nonzero(~ok))
         return ok
 
-    def _all_near(self, x: NDArray[np.float64], limit: NDArray[np.float64], step: NDArray[np.float64]) -> bool:
-        """Every record in range and within one number's step of the one before (the common case, in a
-        few vectorised operations; NaN fails every comparison)."""
-        if not (np.abs(x).max(axis=0) <= limit).all():
+    def accepts_all(self, counter: NDArray[np.int64], x: NDArray[np.float64], acc_cols: int) -> bool:
+        """True, and the records taken as accepted, when a quick test shows that :meth:`check_rows` would
+        accept every one (all in range, each within one number's step of the one before); else False, and
+        nothing changed: :meth:`check_rows` decides. A few vectorised operations."""
+        if self._bounds is None or self._bounds[0].shape[0] != x.shape[1]:
+            acc = np.arange(x.shape[1]) < acc_cols
+            self._bounds = (
+                np.where(acc, self._acc_range, self._gyr_range),
+                np.where(acc, ACC_STEP_MPS2, GYR_STEP_RADPS),
+            )
+            self._last = self._tiled = None
+        if len(counter) and self._all_near(x):
+            self._last = (int(counter[-1]), x[-1])
+            return True
+        return False
+
+    def _all_near(self, x: NDArray[np.float64]) -> bool:
+        """Every record in range and within one number's step of the one before (NaN fails every
+        comparison)."""
+        n, k = x.shape
+        tiled = self._tiled
+        if tiled is None or tiled[0].shape[0] < n or tiled[0].shape[1] != k:
+            assert self._bounds is not None
+            # the bounds repeated row by row: comparing two (n, k) blocks runs as one loop, not n loops of k
+            rows = max(n, _TILE_ROWS)
+            tiled = self._tiled = (np.tile(self._bounds[0], (rows, 1)), np.tile(self._bounds[1], (rows, 1)))
+        limit, step = tiled[0][:n], tiled[1][:n]
+        d = np.abs(x)
+        size = d.size  # count_nonzero: a quicker all() for a few hundred values
+        if np.count_nonzero(d <= limit) != size:
             return False
-        if self._last is not None and not (np.abs(x[0] - self._last[1]) <= step).all():
-            return False
-        return len(x) < 2 or bool((np.abs(x[1:] - x[:-1]).max(axis=0) <= step).all())
+        if self._last is None:
+            d[0] = 0.0
+        else:
+            np.subtract(x[0], self._last[1], out=d[0])
+        np.subtract(x[1:], x[:-1], out=d[1:])
+        return int(np.count_nonzero(np.abs(d, out=d) <= step)) == size
 
     @staticmethod
     def _near(d: NDArray[np.float64], step: NDArray[np.float64], span: int) -> bool:

@@ -25,7 +25,8 @@ make the next 16 384 good packets look like repeats.
 
 Held packets are returned by a later call (:class:`Tracked` indexes the held packets first, then the
 call's own), so a suspect at the end of a read waits for the next read, and nothing good is lost.
-A read that continues the run exactly takes a few comparisons, no per-packet bookkeeping.
+A read that continues the run exactly takes a few comparisons, no per-packet bookkeeping; one whose
+numbers only go forward, each stamp where its number puts it, a few array operations, gaps included.
 """
 
 from __future__ import annotations
@@ -54,6 +55,9 @@ PERIOD_INTERVALS: Final = 16
 steps of up to 8 numbers)."""
 NO_TICK: Final = -1
 """The tick of a packet that has none (stepwise output, an MCU id): judged by its number alone."""
+_PYTHON_BELOW: Final = 12
+"""The time stamps of reads of up to this many packets are checked in Python, longer ones with numpy
+(about 1 µs a packet against a few µs a read)."""
 
 
 class Tracked(NamedTuple):
@@ -145,34 +149,56 @@ class CounterTracker:
         their ``ticks`` (n,), if given, agree with them."""
         if self._high is None or self._pending or len(numbers) == 0:
             return False
-        raw = np.asarray(numbers, dtype=np.int64)
-        if len(raw) > 64:  # vectorised; a live read of a few packets is quicker in Python
-            step = raw[1:] - raw[:-1]
-            if not ((step == 1) | (step == 1 - COUNTER_WRAP)).all():
+        nums = np.asarray(numbers, dtype=np.int64).tolist()
+        first, m = nums[0], len(nums)
+        if first != (self._high_raw + 1) % COUNTER_WRAP:
+            return False
+        # each step is 1 modulo 2**16: compared as lists, one pass in C
+        if first + m <= COUNTER_WRAP:
+            if nums != list(range(first, first + m)):
                 return False
-            nums = [int(raw[0])]
-        else:
-            nums = raw.tolist()
-            if any((b - a) % COUNTER_WRAP != 1 for a, b in itertools.pairwise(nums)):
-                return False
-        if nums[0] != (self._high_raw + 1) % COUNTER_WRAP:
+        elif nums != [(first + i) % COUNTER_WRAP for i in range(m)]:
             return False
         if ticks is None:
             return True
-        tick = np.asarray(ticks, dtype=np.int64)
+        return self._ticks_agree(np.asarray(ticks, dtype=np.int64))
+
+    def _ticks_agree(self, tick: NDArray[np.int64]) -> bool:
+        """Whether the time stamps ``tick`` (n,) of packets that continue the run by number agree with it:
+        all :data:`NO_TICK`, or the first where the run's period puts it and every step one period."""
         period, ref = self.period_ticks, self._ref
+        if len(tick) <= _PYTHON_BELOW:  # a live read of a few packets is quicker in Python
+            t = tick.tolist()
+            if NO_TICK in t:
+                return all(v == NO_TICK for v in t)  # numbers only, or a kind without ticks among them
+            if period is None or ref is None:
+                return False  # the slow path learns the period
+            tol = period // 4
+            return self._first_agrees(t[0], period, ref) and all(
+                abs((b - a) % TICK_WRAP - period) <= tol for a, b in itertools.pairwise(t)
+            )
+        steps = np.subtract(tick[1:], tick[:-1])
+        if period is not None and ref is not None and int(tick[0]) >= 0:
+            # |step mod 2**32 - period| <= tol for every step: where the tick counter does not wrap the
+            # steps are the plain differences and their extremes decide; every tick then follows the
+            # first, so none is NO_TICK
+            tol = period // 4
+            if period - tol <= int(steps.min()) and int(steps.max()) <= period + tol:
+                return self._first_agrees(int(tick[0]), period, ref)
         if NO_TICK in tick:
-            return bool((tick == NO_TICK).all())  # numbers only, or a kind without ticks among them
+            return bool((tick == NO_TICK).all())
         if period is None or ref is None:
-            return False  # the slow path learns the period
-        tol = period // 4
-        first = self._high + 1 - ref[0]
-        if abs(_signed(int(tick[0]) - ref[1] - first * period, TICK_WRAP)) > tol + first * period // 2000:
             return False
-        if len(tick) > 64:
-            return bool((np.abs((tick[1:] - tick[:-1]) % TICK_WRAP - period) <= tol).all())
-        t = tick.tolist()
-        return all(abs((b - a) % TICK_WRAP - period) <= tol for a, b in itertools.pairwise(t))
+        tol = period // 4
+        if not self._first_agrees(int(tick[0]), period, ref):
+            return False
+        return bool((np.abs(steps % TICK_WRAP - period) <= tol).all())
+
+    def _first_agrees(self, tick: int, period: int, ref: tuple[int, int]) -> bool:
+        """Whether the next number's time stamp ``tick`` is where ``period`` puts it after ``ref``."""
+        assert self._high is not None
+        lead = self._high + 1 - ref[0]
+        return abs(_signed(tick - ref[1] - lead * period, TICK_WRAP)) <= period // 4 + lead * period // 2000
 
     def take_run(
         self, numbers: NDArray[np.integer], ticks: NDArray[np.integer] | None = None
@@ -237,6 +263,9 @@ class CounterTracker:
         before = len(self._pending)
         if self.continues(raw, None if ticks is None else tick):
             return self._take_run(raw, tick, before)
+        forward = self._forward(raw, None if ticks is None else tick)
+        if forward is not None:
+            return forward
         self._pending.extend(zip(raw.tolist(), tick.tolist(), strict=True))
         index: list[int] = []
         counter: list[int] = []
@@ -256,6 +285,50 @@ class CounterTracker:
         self.delivered += m
         self._expire()
         return Tracked(np.arange(before, before + m, dtype=np.int64), counters, np.empty(0, dtype=np.int64))
+
+    def _forward(self, raw: NDArray[np.int64], tick: NDArray[np.int64] | None) -> Tracked | None:
+        """The packets, when each is believed at once as the next after the one before, gaps included
+        (what :meth:`_one` decides for them, in a few vectorised steps): each number after the one before
+        and, with time stamps, each stamp where its number puts it (without: each gap at most
+        ``far_ahead``). Else None, and nothing changes."""
+        high, ref, period = self._high, self._ref, self.period_ticks
+        if high is None or self._pending or self._suspects or raw.size == 0:
+            return None
+        step = np.empty(raw.size, dtype=np.int64)
+        step[0] = raw[0] - self._high_raw
+        np.subtract(raw[1:], raw[:-1], out=step[1:])
+        step = (step + COUNTER_WRAP // 2) % COUNTER_WRAP - COUNTER_WRAP // 2
+        if int(step.min()) < 1:
+            return None
+        totals = high + np.add.accumulate(step)
+        if tick is None:
+            if int(step.max()) > self.far_ahead:
+                return None
+        else:
+            if period is None or ref is None or int(tick.min()) < 0:  # learning the period, or NO_TICK
+                return None
+            # each against the one before (the first against ref): |signed(Δtick - Δtotal·period)| within
+            # a quarter period and 1/2000 of the span
+            span = np.empty_like(totals)
+            span[0] = totals[0] - ref[0]
+            span[1:] = step[1:]
+            lag = np.empty_like(tick)
+            lag[0] = tick[0] - ref[1]
+            np.subtract(tick[1:], tick[:-1], out=lag[1:])
+            err = np.abs((lag - span * period + TICK_WRAP // 2) % TICK_WRAP - TICK_WRAP // 2)
+            if not bool((err <= period // 4 + span * period // 2000).all()):
+                return None
+            self._ref = (int(totals[-1]), int(tick[-1]))
+        for i in np.flatnonzero(step > 1).tolist():  # the gaps: numbers missing
+            total = int(totals[i])
+            previous = int(totals[i - 1]) if i else high
+            first_missing = max(previous + 1, total - self._window)
+            self._expired += first_missing - (previous + 1)
+            self._missing.update(range(first_missing, total))
+        self._high, self._high_raw = int(totals[-1]), int(raw[-1])
+        self.delivered += int(raw.size)
+        self._expire()
+        return Tracked(np.arange(raw.size, dtype=np.int64), totals, np.empty(0, dtype=np.int64))
 
     def _agrees(self, ref: tuple[int, int] | None, total: int, tick: int) -> bool | None:
         """Whether ``tick`` is where ``total`` puts it after ``ref``; None when that cannot be told."""
