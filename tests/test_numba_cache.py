@@ -3,6 +3,7 @@ included (``footnav.pipeline.sources_digest``)."""
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -45,3 +46,42 @@ def test_an_edited_kernel_in_a_subfolder_changes_the_key(tmp_path: Path) -> None
 
 def test_a_cache_folder_given_by_the_environment_is_kept(tmp_path: Path) -> None:
     assert cache_dir_of_a_fresh_process(dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))) == tmp_path
+
+
+_FIRST_RUN = """
+import json, sys
+from footnav.pipeline.navigation import warm
+empty = warm.cache_is_empty()
+from footnav.app import navigate, read_recording
+navigate(read_recording(sys.argv[1]))
+from footnav.pipeline.navigation._kernels import run_filter_kernel
+from footnav.pipeline.stance import detectors, levels
+kernels = (run_filter_kernel, detectors._statistic_kernel, detectors._adaptive_threshold_kernel, levels.height_update)
+print(json.dumps({"empty": empty, "cores": warm._cores(), "kernels": {
+    k.py_func.__name__: [sum(k.stats.cache_hits.values()), sum(k.stats.cache_misses.values()), len(k.overloads)]
+    for k in kernels}}))
+"""
+
+
+def test_a_first_run_builds_the_filter_in_a_second_process_and_compiles_nothing_twice(tmp_path: Path) -> None:
+    """With an empty cache, the navigator's first construction compiles the filter kernel in a child
+    process (``footnav.pipeline.navigation.warm``) while it compiles the detector's: the navigation
+    then loads the filter from the cache the child wrote (a hit, no miss) and reuses the detector
+    kernels it built (one compiled overload each, so nothing was compiled twice for other types)."""
+    walk = tmp_path / "walk.csv"
+    from benchmarks.startup import write_walk_csv
+
+    write_walk_csv(walk, 0.5)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    out = subprocess.run(
+        [sys.executable, "-c", _FIRST_RUN, str(walk)], env=env, capture_output=True, text=True, check=True, timeout=600
+    )
+    report = json.loads(out.stdout.strip().splitlines()[-1])
+    assert report["empty"] is True
+    kernels = report["kernels"]
+    for name in ("_statistic_kernel", "_adaptive_threshold_kernel", "height_update"):
+        assert kernels[name] == [0, 1, 1], (name, kernels[name])  # compiled here once, by the build
+    if report["cores"] >= 2:
+        assert kernels["run_filter_kernel"] == [1, 0, 1]  # built by the child, loaded from the cache
+    else:
+        assert kernels["run_filter_kernel"] == [0, 1, 1]  # one core: compiled here, as before

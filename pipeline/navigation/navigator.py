@@ -25,6 +25,7 @@ from footnav.pipeline.navigation.alignment import Alignment, align_from_still, f
 from footnav.pipeline.navigation.batches import clip_variance, implausible_to_nan, nav_batch, zupt_ratio
 from footnav.pipeline.navigation.params import FilterParams
 from footnav.pipeline.navigation.profiles import G0_MPS2, UnitProfile, get_profile
+from footnav.pipeline.navigation.warm import build_kernels
 from footnav.pipeline.samples import ImuBatch
 from footnav.pipeline.stance.detectors import DetectorParams, StreamingDetector
 from footnav.pipeline.stance.height_detector import HeightStanceDetector
@@ -238,6 +239,7 @@ class Navigator:
     """
 
     def __init__(self, config: NavConfig, rate_hz: float, tof: TofConfig | None = None) -> None:
+        build_kernels()  # on two cores, the first time (``footnav.pipeline.navigation.warm``)
         self.config = config
         self.tof = TofAiding(tof or TofConfig())
         self.altimeter = PressureAltimeter()
