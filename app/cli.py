@@ -204,6 +204,7 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
             save=args.save,
             viewer=not args.no_viewer,
             web=args.web,
+            keep_web=args.keep_web,
             capture=bool(cfg["session.capture"]),
             argv=("footnav", *argv),
             tof=args.tof,
@@ -298,6 +299,7 @@ def _replay_capture(args: argparse.Namespace) -> int:
             save=args.save,
             viewer=not args.no_viewer,
             web=args.web,
+            keep_web=args.keep_web,
             config_is_explicit=args.config is not None or args.profile is not None,
             tof=not args.without_tof,
             stance=args.stance,
@@ -335,6 +337,7 @@ def _replay_recording(args: argparse.Namespace) -> int:
             save=args.save,
             viewer=not args.no_viewer,
             web=args.web,
+            keep_web=args.keep_web,
             lsl=_lsl(args),
         )
     )
@@ -366,6 +369,7 @@ def _demo(args: argparse.Namespace) -> int:
             seed=args.seed,
             feet=args.feet,
             web=args.web,
+            keep_web=args.keep_web,
             capture=bool(cfg["session.capture"]),
             config=cfg,
             miscalibrated=args.miscalibrated,
@@ -406,6 +410,8 @@ def main(argv: list[str] | None = None) -> int:
         args.experiment_argv = rest
     elif rest:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
+    if getattr(args, "keep_web", False) and not args.web:
+        parser.error("--keep-web keeps the web viewer of --web: give --web too")
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="footnav: %(message)s")
     if not args.verbose:  # sessions report link events themselves (terminal, recording, capture)
         logging.getLogger("footnav.device.links.reconnecting").setLevel(logging.ERROR)

@@ -178,6 +178,12 @@ def _add_output_args(p: argparse.ArgumentParser, *, capture: bool) -> None:
     p.add_argument("--no-viewer", action="store_true", help="do not open a viewer (save only)")
     p.add_argument("--web", action="store_true", help="serve the web viewer on 127.0.0.1 and print its URL")
     p.add_argument(
+        "--keep-web",
+        action="store_true",
+        help="with --web: leave the web viewer serving after the session ends (its pid is printed; "
+        "any local user can open it)",
+    )
+    p.add_argument(
         "--lsl",
         action="store_true",
         help="also stream each foot's navigation state and the gait events on Lab Streaming Layer "

@@ -101,6 +101,7 @@ class DemoOptions:
     feet: int = 1
     """1: one emulated shoe (``foot``); 2: ``left`` and ``right``, the same walk side by side."""
     web: bool = False
+    keep_web: bool = False
     capture: bool = True
     config: Config | None = None
     """Sessions folder, filter and detector settings (default: built-in; the profile follows the grade)."""
@@ -370,6 +371,7 @@ def _shoe_demo(opts: DemoOptions) -> int:
         save=opts.save,
         want_viewer=opts.viewer,
         web=opts.web,
+        keep_web=opts.keep_web,
         feet=feet,
         recording_id=session_id,
         notice=notice,
@@ -548,6 +550,7 @@ def _unit_demo(opts: DemoOptions) -> int:
             save=opts.save,
             viewer=opts.viewer,
             web=opts.web,
+            keep_web=opts.keep_web,
             capture=opts.capture,
             lsl=lsl,
         )

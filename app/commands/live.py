@@ -131,6 +131,7 @@ class LiveOptions:
     save: Path | None = None
     viewer: bool = True
     web: bool = False
+    keep_web: bool = False
     capture: bool = True
     argv: tuple[str, ...] = ()
     ble_backend: BleBackend | None = None
@@ -256,6 +257,7 @@ async def live_session(opts: LiveOptions) -> int:
         save=opts.save,
         want_viewer=opts.viewer,
         web=opts.web,
+        keep_web=opts.keep_web,
         feet=feet,
         recording_id=session_id,
         notice=notice,

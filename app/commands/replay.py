@@ -126,6 +126,7 @@ class ReplayOptions:
     save: Path | None = None
     viewer: bool = True
     web: bool = False
+    keep_web: bool = False
     config_is_explicit: bool = False
     collect: Callable[[str], NavSink] | None = None
     tof: bool = True
@@ -297,6 +298,7 @@ def run_replay(opts: ReplayOptions) -> int:
         save=opts.save,
         want_viewer=opts.viewer,
         web=opts.web,
+        keep_web=opts.keep_web,
         feet=feet,
         recording_id=str(info.session.get("session_id", opts.path.stem)),
         notice=notice,

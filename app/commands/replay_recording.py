@@ -62,6 +62,7 @@ class RecordingReplayOptions:
     save: Path | None = None
     viewer: bool = True
     web: bool = False
+    keep_web: bool = False
     lsl: LslRequest | None = None
 
 
@@ -108,6 +109,7 @@ def run_recording_replay(opts: RecordingReplayOptions) -> int:
         save=opts.save,
         want_viewer=opts.viewer,
         web=opts.web,
+        keep_web=opts.keep_web,
         recording_id=f"replay-{rec.name}",
         notice=notice,
         truth=rec.gt_pos_m is not None,
