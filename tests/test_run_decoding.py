@@ -12,7 +12,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import itertools
-from collections import deque
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +19,7 @@ import pytest
 from footnav.device.files.capture import CaptureWriter, UnitHeader
 from footnav.device.files.capture_records import chunk_contents
 from footnav.device.modes import NormalImuMode
-from footnav.device.protocol.commands import CommandParser, CommandSet, data_packet
+from footnav.device.protocol.commands import CommandSet, data_packet
 from footnav.device.protocol.framer import DataPacket, Framer, PacketRun
 from footnav.device.protocol.imu import SharedTickClock, decode_imu_rows, decode_payloads, encode_packets
 from footnav.device.protocol.integrity import ImuGuard
@@ -29,6 +28,8 @@ from footnav.device.unit import Batch, OpenShoeUnit
 from footnav.pipeline.samples import ImuBatch
 from mcap.records import Chunk
 from mcap.stream_reader import StreamReader, breakup_chunk
+
+from benchmarks.decode import ChunkLink
 
 W16, W32 = 1 << 16, 1 << 32
 
@@ -222,35 +223,9 @@ def test_decode_imu_rows_equals_decode_payloads_nan_included() -> None:
 # --- the unit driver: short path against general path ------------------------------------------------
 
 
-class _Link:
-    """ACKs each command; returns ``chunks`` one per read."""
-
-    def __init__(self, chunks: list[bytes]) -> None:
-        self._chunks = deque(chunks)
-        self._answers: deque[bytes] = deque()
-        self._parser = CommandParser()
-
-    @property
-    def name(self) -> str:
-        return "memory"
-
-    async def read(self) -> bytes:
-        if self._answers:
-            return self._answers.popleft()
-        return self._chunks.popleft() if self._chunks else b""
-
-    async def write(self, data: bytes) -> None:
-        for cmd in self._parser.feed(data):
-            chk = 0xA0 + cmd.cmd_id
-            self._answers.append(bytes((0xA0, cmd.cmd_id, chk >> 8, chk & 0xFF)))
-
-    async def close(self) -> None:
-        self._chunks.clear()
-
-
 async def _deliver(chunks: list[bytes], *, general: bool) -> tuple[list[ImuBatch], dict[str, int | str]]:
     """What the driver delivers, and its counts (``short``: reads the short path took)."""
-    unit = OpenShoeUnit(_Link(chunks), command_set=CommandSet.V2015)
+    unit = OpenShoeUnit(ChunkLink(chunks), command_set=CommandSet.V2015)
     short = 0
     normal_run = unit._normal_run
 
