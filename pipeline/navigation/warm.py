@@ -27,8 +27,8 @@ _BUILT: list[bool] = []
 
 
 def cache_is_empty() -> bool:
-    """True when numba's cache folder holds no index of the filter kernel (a first run, or the
-    sources changed), or the cache is not in use."""
+    """True when numba's cache folder (``NUMBA_CACHE_DIR``, which ``footnav.pipeline`` sets) holds no
+    index of the filter kernel: a first run, or the sources changed. False when no folder is set."""
     folder = os.environ.get("NUMBA_CACHE_DIR")
     if not folder:
         return False
