@@ -256,21 +256,26 @@ async def test_unit_reset_on_disconnect_is_restarted_by_the_resume_sequence(radi
     ):
         unit = OpenShoeUnit(link)
         await unit.start_imu_stream(rate_divider_log2=1)
-        received = 0
+        received, after_reset = 0, 0
         async with asyncio.timeout(20 * HANG_GUARD), contextlib.aclosing(unit.imu_batches()) as stream:
             async for batch in stream:
                 received += len(batch)
+                if p.stats.connections == 2:
+                    after_reset += len(batch)
                 if received >= 200 and p.stats.connections == 1:
                     await p.disconnect(reset=True)  # a rebooted unit waits for the start command
-                if received >= 1000:
+                if after_reset >= 200:  # on however busy a machine: samples from after the reset
                     break
         gap = link.health.gaps[0]
         lost = unit.stats.lost_packets
+        await stream.aclose()
+        in_flight = p.stats.notified_bytes - unit.stats.bytes_received  # sent, never read (now: the stream is shut)
     assert [c.cmd_id for c in p.commands] == [0x40, 0x40]  # the learned start, replayed
     assert p.commands[1].payload == bytes([2])  # with its rate divider (500 Hz)
-    # A stopped unit numbers nothing while stopped: only what was in the module's FIFO is missing.
+    # A stopped unit numbers nothing while stopped: only what was in the module's FIFO, or already notified
+    # but lost with the link (a busy host reads behind the radio), is missing.
     assert gap.packets_missing == lost
-    assert gap.packets_missing * 34 <= p.stats.fifo_bytes_cleared + 34
+    assert gap.packets_missing * 34 <= p.stats.fifo_bytes_cleared + max(in_flight, 0) + 34
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="forces the no-D-Bus path of bleak's BlueZ backend")
