@@ -134,6 +134,18 @@ def test_building_the_parser_imports_no_numerics_or_rerun() -> None:
     assert out.stdout.strip() == ""
 
 
+def test_the_session_commands_import_no_scipy_optimize_or_stats() -> None:
+    """``scipy.optimize`` (calibration's fit) and ``scipy.stats`` (the lever-arm check) take about a second
+    each to import; a replay, demo, live session or export uses neither until it calibrates or checks."""
+    code = (
+        "import sys; import footnav.app.commands.replay, footnav.app.commands.demo, footnav.app.commands.live, "
+        "footnav.app.commands.export; "
+        "print(' '.join(m for m in ('scipy.optimize', 'scipy.stats') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == ""
+
+
 def test_experiment_help_imports_no_numerics_and_lists_every_experiment() -> None:
     code = (
         "import sys, contextlib, io; from footnav.app.experiments import experiment_parser; "

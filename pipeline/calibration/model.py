@@ -39,7 +39,6 @@ import numpy as np
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.samples import ImuBatch
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
 
 F64 = NDArray[np.float64]
 
@@ -496,6 +495,8 @@ def fit_calibration(
     def residuals(x: F64) -> F64:
         u = invert_model(full(x), acc, dt)
         return np.asarray(np.linalg.norm(u, axis=1) - gravity_mps2, dtype=np.float64)
+
+    from scipy.optimize import least_squares  # here, not at the top: importing it takes about a second
 
     sol = least_squares(residuals, theta0[free], method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12)
     res = np.asarray(sol.fun, dtype=np.float64)

@@ -43,7 +43,6 @@ from dataclasses import dataclass
 import numpy as np
 from footnav.pipeline.dual_imu.model import ACC_FULL_SCALE_MPS2, GYR_FULL_SCALE_RADPS
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 F64 = NDArray[np.float64]
 
@@ -181,6 +180,8 @@ def check_lever_arm(
     n_win = idx.size // per_window
     win_nis = np.array([nis[idx[i * per_window : (i + 1) * per_window]].sum() for i in range(n_win)])
     win_t = np.array([idx[(i + 1) * per_window - 1] / rate_hz for i in range(n_win)])
+    from scipy.stats import chi2  # here, not at the top: importing scipy.stats takes about a second
+
     bound = np.full(n_win, float(chi2.ppf(1.0 - alpha, 3 * per_window)))
     flagged = float(np.mean(win_nis > bound)) if n_win else 0.0
     Au = A[use]
