@@ -124,26 +124,23 @@ def test_no_import_cycles_between_modules() -> None:
     assert cycles == []
 
 
-def test_building_the_parser_imports_no_numerics_or_rerun() -> None:
-    code = (
-        "import sys; from footnav.app.parser import build_parser; build_parser(); "
-        "heavy = ('numpy', 'numba', 'scipy', 'rerun', 'serial', 'bleak', 'mcap'); "
-        "print(' '.join(m for m in heavy if m in sys.modules))"
-    )
+def imported_after(statement: str, modules: tuple[str, ...]) -> list[str]:
+    """Which of ``modules`` a fresh interpreter holds after running ``statement``."""
+    code = f"import sys; {statement}; print(' '.join(m for m in {modules!r} if m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == ""
+    return out.stdout.split()
+
+
+def test_building_the_parser_imports_no_numerics_or_rerun() -> None:
+    heavy = ("numpy", "numba", "scipy", "rerun", "serial", "bleak", "mcap")
+    assert imported_after("from footnav.app.parser import build_parser; build_parser()", heavy) == []
 
 
 def test_the_session_commands_import_no_scipy_optimize_or_stats() -> None:
     """``scipy.optimize`` (calibration's fit) and ``scipy.stats`` (the lever-arm check) take about a second
     each to import; a replay, demo, live session or export uses neither until it calibrates or checks."""
-    code = (
-        "import sys; import footnav.app.commands.replay, footnav.app.commands.demo, footnav.app.commands.live, "
-        "footnav.app.commands.export; "
-        "print(' '.join(m for m in ('scipy.optimize', 'scipy.stats') if m in sys.modules))"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == ""
+    commands = ", ".join(f"footnav.app.commands.{c}" for c in ("replay", "demo", "live", "export"))
+    assert imported_after(f"import {commands}", ("scipy.optimize", "scipy.stats")) == []
 
 
 def test_experiment_help_imports_no_numerics_and_lists_every_experiment() -> None:
