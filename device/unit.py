@@ -650,20 +650,25 @@ class OpenShoeUnit:
         counters = self._counters.take_run(run.numbers, None if self._extensions else ticks)
         if counters is None:
             return None
-        imu = decode_imu_rows(run.payloads)
-        m = len(counters)
+        return self._imu_samples(counters, ticks, run.payloads, host_ns)
+
+    def _imu_samples(
+        self, counters: NDArray[np.int64], ticks: NDArray[np.int64], payloads: NDArray[np.uint8], host_ns: int
+    ) -> list[Batch]:
+        """The normal-IMU payloads (m, 28) of the packets numbered ``counters`` (m,), time-stamped
+        ``ticks`` (m,), as one batch of their plausible samples read at ``host_ns`` ([] when none is)."""
+        imu = decode_imu_rows(payloads)
         if not self._imu_guard.accepts_all(counters, imu, 3):
             ok = self._imu_guard.check_rows(counters, imu, 3)
-            self._implausible += m - int(np.count_nonzero(ok))
+            self._implausible += len(counters) - int(np.count_nonzero(ok))
             ticks, imu, counters = ticks[ok], imu[ok], counters[ok]
-            m = len(counters)
-            if m == 0:
+            if counters.size == 0:
                 return []
+        m = int(counters.size)
         self._samples += m
-        t_s = self._clock.update(ticks)
         host = np.empty(m, dtype=np.int64)
         host.fill(host_ns)
-        return [ImuBatch(t_s, imu[:, :3].copy(), imu[:, 3:].copy(), counters, host)]
+        return [ImuBatch(self._clock.update(ticks), imu[:, :3].copy(), imu[:, 3:].copy(), counters, host)]
 
     def _normal_only(self, frames: list[Frame | PacketRun]) -> bool:
         """Whether the general path would take every data packet of ``frames`` as a normal-IMU sample
@@ -712,19 +717,7 @@ class OpenShoeUnit:
             positions, counters = positions[order], counters[order]
         if counters.size == 0:
             return []
-        imu = decode_imu_rows(payloads[positions])
-        ticks = ticks[positions]
-        if not self._imu_guard.accepts_all(counters, imu, 3):
-            ok = self._imu_guard.check_rows(counters, imu, 3)
-            self._implausible += int(counters.size) - int(np.count_nonzero(ok))
-            ticks, imu, counters = ticks[ok], imu[ok], counters[ok]
-            if counters.size == 0:
-                return []
-        m = int(counters.size)
-        self._samples += m
-        host = np.empty(m, dtype=np.int64)
-        host.fill(host_ns)
-        return [ImuBatch(self._clock.update(ticks), imu[:, :3].copy(), imu[:, 3:].copy(), counters, host)]
+        return self._imu_samples(counters, ticks[positions], payloads[positions], host_ns)
 
     def _route(self, out: _Decoded, counter: int, number: int, payload: bytes) -> None:
         n = len(payload)
