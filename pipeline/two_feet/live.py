@@ -39,6 +39,7 @@ among its forward batches, as one more batch earlier than those already given.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -315,20 +316,14 @@ class FeetLockstep:
         """The foot's estimates to its sinks (consecutive forward batches joined) and each lead-in to its
         lead-in sinks, in the order they were made."""
         out, f.out = f.out, []
-        forward: list[NavBatch] = []
-        for nav, is_lead_in in out:
-            if not is_lead_in:
-                forward.append(nav)
+        for is_lead_in, group in itertools.groupby(out, key=lambda made: made[1]):
+            navs = [nav for nav, _ in group]
+            if is_lead_in:
+                for nav in navs:
+                    for sink in f.lead_in_sinks:
+                        sink(nav)
                 continue
-            if forward:
-                joined = concat_batches(forward)
-                forward.clear()
-                for sink in f.sinks:
-                    sink(joined)
-            for sink in f.lead_in_sinks:
-                sink(nav)
-        if forward:
-            joined = concat_batches(forward)
+            joined = concat_batches(navs)
             for sink in f.sinks:
                 sink(joined)
 
