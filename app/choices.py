@@ -6,9 +6,9 @@ from __future__ import annotations
 
 PATHS = ("rectangle", "line", "figure8", "stairs")
 """Emulated walking courses (:data:`footnav.device.emulator.motion.paths` builds them)."""
-IMU_GRADES = ("adis16367", "gx3", "icm20948", "ideal", "mpu6500x4")
+IMU_GRADES = ("adis16367", "gx3", "icm20948", "icm20948-board", "ideal", "mpu6500x4")
 """Emulated sensor grades: the keys of :data:`footnav.device.emulator.sensors.imu_errors.IMU_GRADES`."""
-AXIS_ERRORS = ("gyro-bias-calibrated", "none")
+AXIS_ERRORS = ("gyro-bias-calibrated", "icm20948-datasheet", "none")
 """Emulated axis errors: the keys of :data:`footnav.device.emulator.sensors.imu_errors.AXIS_ERRORS`."""
 PROFILES = ("adis16367", "generic", "gx3", "mpu6500x4")
 """Built-in unit profiles: the keys of :data:`footnav.pipeline.navigation.profiles.PROFILES`."""

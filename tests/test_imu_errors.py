@@ -6,7 +6,15 @@ import math
 
 import numpy as np
 import pytest
-from footnav.device.emulator.sensors.imu_errors import AXIS_ERRORS, IMU_GRADES, ImuGrade, corrupt, gauss_markov
+from footnav.device.emulator.sensors.imu_errors import (
+    AXIS_ERRORS,
+    ICM20948_PAPER_RANGE,
+    IMU_GRADES,
+    FullScale,
+    ImuGrade,
+    corrupt,
+    gauss_markov,
+)
 
 NOISY_GRADES = [name for name in IMU_GRADES if name != "ideal"]
 
@@ -192,3 +200,45 @@ def test_axis_error_spread_across_seeds_matches_the_setting() -> None:
     np.testing.assert_array_equal(axes.draw(7)[0], axes.draw(7)[0])
     with pytest.raises(ValueError, match="unknown axis errors"):
         corrupt(np.zeros((2, 3)), np.zeros((2, 3)), 1000.0, "ideal", seed=0, axes="factory")
+
+
+def test_full_scale_saturates_and_quantises_to_the_adc_step() -> None:
+    """±8 g / ±1000 °/s, 16 bits (the dual-IMU paper's ICM-20948 setting): a heel strike of 10 g and a
+    1200 °/s swing read full scale, every reading is a whole number of ADC steps, and the counts say
+    which samples clipped."""
+    fs = ICM20948_PAPER_RANGE
+    g = 9.80665
+    truth_acc = np.array([[0.0, 0.0, g], [10.0 * g, 0.0, g], [0.0, -9.0 * g, 0.0], [1e-4, 0.0, 0.0]])
+    truth_gyr = np.array([[0.0, 0.0, 0.0], [0.0, math.radians(1200.0), 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    acc, gyr, applied = corrupt(truth_acc, truth_gyr, 100.0, "ideal", seed=0, full_scale=fs)
+    acc_step, gyr_step = 8.0 * g / 32768.0, math.radians(1000.0) / 32768.0
+    assert acc[1, 0] == pytest.approx(8.0 * g) and acc[2, 1] == pytest.approx(-8.0 * g)
+    assert gyr[1, 1] == pytest.approx(math.radians(1000.0))
+    np.testing.assert_allclose(acc / acc_step, np.round(acc / acc_step), atol=1e-9)
+    np.testing.assert_allclose(gyr / gyr_step, np.round(gyr / gyr_step), atol=1e-9)
+    assert np.abs(acc - np.clip(truth_acc, -8.0 * g, 8.0 * g)).max() <= acc_step / 2.0 + 1e-12
+    assert acc[3, 0] == 0.0  # below half a step
+    assert (applied.acc_clipped, applied.gyr_clipped) == (2, 1)
+    # without a full scale nothing is clipped or rounded
+    plain_acc, _, plain = corrupt(truth_acc, truth_gyr, 100.0, "ideal", seed=0)
+    np.testing.assert_array_equal(plain_acc, truth_acc)
+    assert (plain.acc_clipped, plain.gyr_clipped) == (0, 0)
+    assert FullScale(1.0, 1.0, bits=8).apply(np.full((1, 3), 0.3), np.zeros((1, 3)))[0][0, 0] == 38 / 128
+
+
+def test_uncalibrated_icm20948_draws_the_datasheet_tolerances() -> None:
+    """The dual-IMU paper's parts: DS-000189 typical tolerances as 1σ (±0.5 % / ±2 % accelerometer,
+    ±1.5 % / ±2 % gyroscope, ±50 mg board-level zero-g)."""
+    axes = AXIS_ERRORS["icm20948-datasheet"]
+    acc = np.array([axes.draw(seed)[0] for seed in range(400)])
+    gyr = np.array([axes.draw(seed)[1] for seed in range(400)])
+    diag, off = [0, 1, 2], ([0, 0, 1, 1, 2, 2], [1, 2, 0, 2, 0, 1])
+    assert (acc[:, diag, diag] - 1.0).std() == pytest.approx(0.005, rel=0.08)
+    assert (gyr[:, diag, diag] - 1.0).std() == pytest.approx(0.015, rel=0.08)
+    assert acc[:, off[0], off[1]].std() == pytest.approx(0.02, rel=0.08)
+    assert gyr[:, off[0], off[1]].std() == pytest.approx(0.02, rel=0.08)
+    zeros = np.zeros((2, 3))
+    biases = np.array(
+        [corrupt(zeros, zeros, 100.0, "icm20948-board", s)[2].acc_turn_on_bias_b_mps2 for s in range(400)]
+    )
+    assert biases.std() == pytest.approx(0.050 * 9.80665, rel=0.08)

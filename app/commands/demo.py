@@ -79,6 +79,7 @@ PROFILE_OF_GRADE = {
     "mpu6500x4": "mpu6500x4",
     "adis16367": "adis16367",
     "icm20948": "generic",
+    "icm20948-board": "generic",
     "gx3": "gx3",
     "ideal": "mpu6500x4",
 }

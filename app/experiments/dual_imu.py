@@ -18,6 +18,10 @@ its adaptive threshold, run on IMU 1):
   their largest separation (:mod:`footnav.pipeline.two_feet`, R = 1.2 m; Skog et al. 2012), on the two
   feet of a walker of the same course (``two_feet_walks``, IMUs of the same grade, the left foot scored).
 
+``--paper-setup`` emulates the paper's own hardware instead of footnav's default board: uncalibrated
+ICM-20948s (:data:`PAPER_SETUP`: datasheet sensitivity, cross-axis and board-level zero-g tolerances)
+at 100 Hz, their readings saturated at ±8 g and ±1000 °/s and quantised to 16 bits.
+
 Errors are 3D distances from IMU 1's (foot2foot: the left foot's) true position at every sample; per
 run the maximum and the mean, then averaged over the seeds. Every filter is zero-velocity aiding alone: the single-IMU
 navigator's stance height constraint (``footnav.pipeline.stance.levels``), which the dual-IMU filter does not
@@ -42,7 +46,13 @@ from footnav.device.emulator.sensors.dual_imu import (
     one_lap_duration_s,
     simulate_dual_imu,
 )
-from footnav.device.emulator.sensors.imu_errors import AXIS_ERRORS, corrupt
+from footnav.device.emulator.sensors.imu_errors import (
+    AXIS_ERRORS,
+    ICM20948_PAPER_RANGE,
+    STANDARD_GRAVITY_MPS2,
+    FullScale,
+    corrupt,
+)
 from footnav.pipeline.dual_imu.board_eskf import DualEskfConfig, DualEskfTrack, run_dual_eskf
 from footnav.pipeline.dual_imu.chen2022 import DualTrack, PaperConfig, run_paper
 from footnav.pipeline.navigation import eskf
@@ -77,6 +87,45 @@ LABELS: Final = {
 PROFILE: Final = "generic"
 """The filters' noise model: a single ICM-20948-class part (``footnav.pipeline.navigation.profiles``)."""
 DEFAULT_SEEDS: Final = 8
+
+
+@dataclass(frozen=True, slots=True)
+class BoardSetup:
+    """The emulated IMUs: every IMU of a run (both on the board, one on each foot) alike, errors drawn
+    independently.
+
+    Attributes
+    ----------
+    grade
+        ``imu_errors.IMU_GRADES`` key: noise and biases.
+    axes
+        ``imu_errors.AXIS_ERRORS`` key: scale-factor and cross-axis errors.
+    rate_hz
+        Sample rate, Hz.
+    full_scale
+        Output range and ADC (None: unbounded, unquantised).
+    """
+
+    grade: str = DEFAULT_GRADE
+    axes: str = "none"
+    rate_hz: float = 1000.0
+    full_scale: FullScale | None = None
+
+    def describe(self) -> str:
+        """One line for the table's footer."""
+        fs = self.full_scale
+        rng = "unbounded"
+        if fs is not None:
+            rng = f"±{fs.acc_mps2 / STANDARD_GRAVITY_MPS2:g} g, ±{math.degrees(fs.gyr_radps):g} °/s, {fs.bits}-bit"
+        return f"IMUs: {self.grade} grade at {self.rate_hz:g} Hz, axis errors {self.axes!r}, range {rng}"
+
+
+PAPER_SETUP: Final = BoardSetup(
+    grade="icm20948-board", axes="icm20948-datasheet", rate_hz=100.0, full_scale=ICM20948_PAPER_RANGE
+)
+"""The paper's hardware (Chen et al. 2022, its section 4): ICM-20948s at 100 Hz, ±8 g, ±1000 °/s,
+uncalibrated but for the gyroscope's start-up bias (``imu_errors``: grade ``icm20948-board``, axis
+errors ``icm20948-datasheet``)."""
 
 
 def classic_profile(profile: UnitProfile) -> UnitProfile:
@@ -154,12 +203,18 @@ def evaluate_run(
     seed: int,
     *,
     lever_b_m: tuple[float, float, float] = DEFAULT_LEVER_B_M,
-    grade: str = DEFAULT_GRADE,
-    axes: str = "none",
-    rate_hz: float = 1000.0,
+    setup: BoardSetup = BoardSetup(),
 ) -> RunResult:
-    """Walk ``course`` once with seed ``seed`` and navigate it with every method."""
-    rec = simulate_dual_imu(course, seed=seed, lever_b_m=lever_b_m, grade=grade, axes=axes, rate_hz=rate_hz)
+    """Walk ``course`` once with seed ``seed`` on the IMUs of ``setup`` and navigate it with every method."""
+    rec = simulate_dual_imu(
+        course,
+        seed=seed,
+        lever_b_m=lever_b_m,
+        grade=setup.grade,
+        axes=setup.axes,
+        rate_hz=setup.rate_hz,
+        full_scale=setup.full_scale,
+    )
     profile = get_profile(PROFILE)
     nav_config = NavConfig(profile=profile, stance_levels=False)
     acc1 = np.ascontiguousarray(rec.acc_b_mps2[:, 0])
@@ -197,7 +252,7 @@ def evaluate_run(
     tracks["footnav"] = footnav.pos1_n_m
     truth = rec.truth.imu1.pos_n_m
     errors = {m: np.linalg.norm(tracks[m] - truth, axis=1) for m in BOARD_METHODS}
-    errors["foot2foot"] = foot_to_foot_errors(course, seed, grade=grade, axes=axes, config=nav_config, rate_hz=rate_hz)
+    errors["foot2foot"] = foot_to_foot_errors(course, seed, setup, nav_config)
     return RunResult(
         recording=rec,
         stance=stance,
@@ -209,17 +264,23 @@ def evaluate_run(
     )
 
 
-def foot_to_foot_errors(
-    course: str, seed: int, *, grade: str, axes: str, config: NavConfig, rate_hz: float = 1000.0
-) -> F64:
+def foot_to_foot_errors(course: str, seed: int, setup: BoardSetup, config: NavConfig) -> F64:
     """(n,) 3D error of the left foot at every sample, m, of one lap of ``course`` walked by two feet, each
-    with its own IMU of ``grade`` (independent errors), navigated coupled by the distance bound."""
+    with its own IMU of ``setup`` (independent errors), navigated coupled by the distance bound."""
     _, lap_s = one_lap_duration_s(course, 1.4, 3.0)
     gait_seed, seed_l, seed_r = (int(s.generate_state(1)[0]) for s in np.random.SeedSequence([seed, 2]).spawn(3))
-    feet = two_feet_walks(course, lap_s, rate_hz, seed=gait_seed)
+    feet = two_feet_walks(course, lap_s, setup.rate_hz, seed=gait_seed)
     signals = []
     for truth, imu_seed in zip(feet, (seed_l, seed_r), strict=True):
-        acc, gyr, _ = corrupt(truth.acc_b_mps2, truth.gyr_b_radps, truth.rate_hz, grade, imu_seed, axes=axes)
+        acc, gyr, _ = corrupt(
+            truth.acc_b_mps2,
+            truth.gyr_b_radps,
+            truth.rate_hz,
+            setup.grade,
+            imu_seed,
+            axes=setup.axes,
+            full_scale=setup.full_scale,
+        )
         signals.append(FootSignals(truth.t_s, acc, gyr, truth.rate_hz))
     result = navigate_feet(signals[0], signals[1], config, FootSeparation())
     left = feet[0].pos_n_m
@@ -249,8 +310,7 @@ def error_table(
     courses: tuple[str, ...] = COURSES,
     *,
     first_runs: dict[str, RunResult] | None = None,
-    axes: str = "none",
-    rate_hz: float = 1000.0,
+    setup: BoardSetup = BoardSetup(),
 ) -> list[TableRow]:
     """Run every course and seed; average the per-run max and mean errors over the seeds.
 
@@ -258,7 +318,7 @@ def error_table(
     """
     rows: list[TableRow] = []
     for course in courses:
-        runs = [evaluate_run(course, s, axes=axes, rate_hz=rate_hz) for s in seeds]
+        runs = [evaluate_run(course, s, setup=setup) for s in seeds]
         if first_runs is not None:
             first_runs[course] = runs[0]
         mx = {m: float(np.mean([r.max_error_m[m] for r in runs])) for m in METHODS}
@@ -278,7 +338,7 @@ def error_table(
     return rows
 
 
-def format_table(rows: list[TableRow], seeds: list[int], axes: str = "none", rate_hz: float = 1000.0) -> str:
+def format_table(rows: list[TableRow], seeds: list[int], setup: BoardSetup = BoardSetup()) -> str:
     """The table as text, with the methods spelled out underneath."""
     lines = [
         f"position error of IMU 1 (3D, every sample), mean over seeds {seeds[0]}..{seeds[-1]} ({len(seeds)} runs "
@@ -296,7 +356,7 @@ def format_table(rows: list[TableRow], seeds: list[int], axes: str = "none", rat
     lines.append(
         "same record and same stance samples (SHOE detector, adaptive threshold, on IMU 1) for all but paper-3c "
         "(its own detector) and foot2foot (its own two-feet walk); "
-        f"IMUs: {DEFAULT_GRADE} grade at {rate_hz:g} Hz, axis errors {axes!r}, independent errors; "
+        f"{setup.describe()}, independent errors; "
         f"lever arm {DEFAULT_LEVER_B_M} m; "
         f"filter profile {PROFILE!r}"
     )
@@ -333,14 +393,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="HZ",
         help="the emulated IMUs' sample rate (default 1000; the paper: 100)",
     )
+    parser.add_argument(
+        "--paper-setup",
+        action="store_true",
+        help="emulate the paper's own IMUs instead: uncalibrated ICM-20948s at 100 Hz, ±8 g, ±1000 °/s, 16-bit "
+        "(overrides --rate and --axis-errors)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     """Print the table (and write the recording with ``--save``)."""
     seeds = list(range(args.first_seed, args.first_seed + max(1, args.seeds)))
     runs: dict[str, RunResult] = {}
-    rows = error_table(seeds, first_runs=runs, axes=args.axis_errors, rate_hz=args.rate)
-    print(format_table(rows, seeds, args.axis_errors, args.rate))
+    setup = PAPER_SETUP if args.paper_setup else BoardSetup(axes=args.axis_errors, rate_hz=args.rate)
+    rows = error_table(seeds, first_runs=runs, setup=setup)
+    print(format_table(rows, seeds, setup))
     if args.save is not None:
         save_dual_runs(args.save, {c: view_of(r) for c, r in runs.items()})
         print(f"recording of seed {seeds[0]} written to {args.save} (open it with: rerun {args.save})")

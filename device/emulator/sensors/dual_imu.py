@@ -33,7 +33,7 @@ from typing import Final
 import numpy as np
 from footnav.device.emulator.motion import paths
 from footnav.device.emulator.motion.gait import GaitTruth, simulate_walk
-from footnav.device.emulator.sensors.imu_errors import ImuErrorsApplied, ImuGrade, corrupt
+from footnav.device.emulator.sensors.imu_errors import FullScale, ImuErrorsApplied, ImuGrade, corrupt
 from footnav.pipeline.dual_imu.model import quat_to_mats
 from footnav.pipeline.dual_imu.navigator import DEFAULT_LEVER_B_M as DEFAULT_BOARD_LEVER_B_M
 from numpy.typing import NDArray
@@ -172,6 +172,7 @@ def simulate_dual_imu(
     initial_still_s: float = 3.0,
     laps: int = 1,
     axes: str = "none",
+    full_scale: FullScale | None = None,
 ) -> DualImuRecording:
     """Walk ``laps`` laps of a closed course with a dual-IMU board (errors independent per IMU).
 
@@ -188,6 +189,8 @@ def simulate_dual_imu(
     axes : str
         Scale-factor and cross-axis errors of both IMUs (a key of ``imu_errors.AXIS_ERRORS``; drawn
         independently).
+    full_scale : FullScale or None
+        Both IMUs' output range and ADC (None: unbounded, unquantised).
     """
     n_lap, lap_s = one_lap_duration_s(path, speed_mps, initial_still_s)
     duration_s = initial_still_s + laps * (lap_s - initial_still_s)
@@ -209,7 +212,7 @@ def simulate_dual_imu(
     errs = []
     for i, s in enumerate((seed1, seed2)):
         acc[:, i], gyr[:, i], applied = corrupt(
-            board.acc_b_mps2[:, i], board.gyr_b_radps[:, i], rate_hz, grade, s, axes=axes
+            board.acc_b_mps2[:, i], board.gyr_b_radps[:, i], rate_hz, grade, s, axes=axes, full_scale=full_scale
         )
         errs.append(applied)
     return DualImuRecording(board, acc, gyr, (errs[0], errs[1]), path, seed)

@@ -16,7 +16,9 @@ Measured signal, per sensor (accelerometer or gyroscope) and axis, at sample ``k
 - ``w_k``: white noise, independent between samples.
 
 Optionally the gyroscope lags the accelerometer by a constant ``gyr_delay_s`` = τ (:func:`corrupt`): its true
-signal is read at ``t_k − τ`` (linear interpolation, held at the first and last sample beyond the ends).
+signal is read at ``t_k − τ`` (linear interpolation, held at the first and last sample beyond the ends), and the
+output saturates at a full scale and is quantised by the ADC (:class:`FullScale`): ``clip(y, ±FS)`` rounded to
+``FS / 2^(bits−1)``.
 
 Noise densities are *one-sided* spectral densities as datasheets give them (RMS noise = density × √bandwidth).
 Samples are taken without an anti-alias filter, so the noise bandwidth is the Nyquist frequency and the per-sample
@@ -132,6 +134,19 @@ IMU_GRADES: dict[str, ImuGrade] = {
         acc_bias_instability_mps2=0.1 * _MG,
         gyr_bias_instability_radps=20.0 / 3600.0 * _DEG,
     ),
+    # The same part uncalibrated on its board, as the dual-IMU paper's (Chen et al. 2022) used it:
+    # DS-000189 rev 1.3 accelerometer zero-g initial tolerance, board level, ±50 mg, taken as 1σ (an
+    # assumption: the datasheet gives a typical value). The gyro's ±5 °/s initial zero-rate offset is
+    # removed by the start-up calibration every filter here gets; 0.1 °/s residual as above.
+    "icm20948-board": ImuGrade(
+        name="icm20948-board",
+        acc_noise_density_mps2_rthz=230.0 * _UG,
+        gyr_noise_density_radps_rthz=0.015 * _DEG,
+        acc_bias_sigma_mps2=50.0 * _MG,
+        gyr_bias_sigma_radps=0.1 * _DEG,
+        acc_bias_instability_mps2=0.1 * _MG,
+        gyr_bias_instability_radps=20.0 / 3600.0 * _DEG,
+    ),
     # LORD MicroStrain 3DM-GX3-25, product datasheet (typical values as listed there; re-check
     # against the revision in use): gyro noise density 0.03 °/s/√Hz, in-run bias stability 18 °/h,
     # initial bias ±0.25 °/s; accel noise density 80 µg/√Hz, in-run bias stability 0.04 mg,
@@ -213,8 +228,52 @@ AXIS_ERRORS: dict[str, AxisErrors] = {
         gyr_scale_sigma=0.03 / 3.0,
         gyr_cross_axis_sigma=0.02 / 3.0,
     ),
+    # An uncalibrated TDK ICM-20948 (the dual-IMU paper's part), datasheet DS-000189 rev 1.3 typical
+    # values taken as 1σ (an assumption): accelerometer sensitivity initial tolerance ±0.5 % and
+    # cross-axis sensitivity ±2 %; gyroscope sensitivity initial tolerance ±1.5 % and cross-axis ±2 %.
+    "icm20948-datasheet": AxisErrors(
+        "icm20948-datasheet",
+        acc_scale_sigma=0.005,
+        acc_cross_axis_sigma=0.02,
+        gyr_scale_sigma=0.015,
+        gyr_cross_axis_sigma=0.02,
+    ),
 }
 """Named axis-error (calibration residual) settings; sources and assumptions per entry."""
+
+
+@dataclass(frozen=True, slots=True)
+class FullScale:
+    """An IMU's output range and ADC: readings beyond ±full scale saturate, the rest are quantised.
+
+    Attributes
+    ----------
+    acc_mps2
+        Accelerometer full scale, m/s² (readings clip to ±acc_mps2).
+    gyr_radps
+        Gyroscope full scale, rad/s.
+    bits
+        ADC word length, two's complement: one step is full scale / 2^(bits − 1).
+    """
+
+    acc_mps2: float
+    gyr_radps: float
+    bits: int = 16
+
+    def apply(self, acc_b_mps2: F64, gyr_b_radps: F64) -> tuple[F64, F64, int, int]:
+        """(acc, gyr) (n, 3) saturated and quantised, and how many samples clipped on each sensor."""
+        out = []
+        clipped = []
+        for y, fs in ((acc_b_mps2, self.acc_mps2), (gyr_b_radps, self.gyr_radps)):
+            over = np.abs(y) > fs
+            clipped.append(int(np.count_nonzero(over.any(axis=1))))
+            step = fs / 2.0 ** (self.bits - 1)
+            out.append(np.round(np.clip(y, -fs, fs) / step) * step)
+        return out[0], out[1], clipped[0], clipped[1]
+
+
+ICM20948_PAPER_RANGE = FullScale(acc_mps2=8.0 * STANDARD_GRAVITY_MPS2, gyr_radps=1000.0 * _DEG)
+"""The dual-IMU paper's ICM-20948 setting: ±8 g, ±1000 °/s, 16-bit ADCs (DS-000189 rev 1.3, §3.1-3.2)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -243,6 +302,8 @@ class ImuErrorsApplied:
         (3, 3) accelerometer axis-error matrix applied (identity: none).
     gyr_axes
         (3, 3) gyroscope axis-error matrix applied.
+    acc_clipped, gyr_clipped
+        Samples whose reading saturated (any axis) on each sensor (0 without a full scale).
     """
 
     grade: ImuGrade
@@ -255,6 +316,8 @@ class ImuErrorsApplied:
     gyr_noise_b_radps: F64
     acc_axes: F64
     gyr_axes: F64
+    acc_clipped: int = 0
+    gyr_clipped: int = 0
 
 
 def gauss_markov(
@@ -330,6 +393,7 @@ def corrupt(
     *,
     gyr_delay_s: float = 0.0,
     axes: AxisErrors | str = "none",
+    full_scale: FullScale | None = None,
 ) -> tuple[F64, F64, ImuErrorsApplied]:
     """Add a grade's errors to true IMU signals.
 
@@ -351,6 +415,8 @@ def corrupt(
     axes : AxisErrors or str
         Scale-factor and cross-axis errors (or a key of :data:`AXIS_ERRORS`), applied to the true
         signals first (module docstring). Default ``"none"``.
+    full_scale : FullScale or None
+        The output range and ADC the readings pass through last (None: unbounded, unquantised).
 
     Returns
     -------
@@ -400,6 +466,10 @@ def corrupt(
     gyr_noise = grade.gyr_noise_sigma_radps(rate_hz) * rng.standard_normal((n, 3))
     acc_bias = acc_turn_on + acc_drift
     gyr_bias = gyr_turn_on + gyr_drift
+    acc_out, gyr_out = acc_in + acc_bias + acc_noise, gyr_in + gyr_bias + gyr_noise
+    acc_clipped = gyr_clipped = 0
+    if full_scale is not None:
+        acc_out, gyr_out, acc_clipped, gyr_clipped = full_scale.apply(acc_out, gyr_out)
     applied = ImuErrorsApplied(
         grade=grade,
         rate_hz=float(rate_hz),
@@ -411,5 +481,7 @@ def corrupt(
         gyr_noise_b_radps=gyr_noise,
         acc_axes=acc_axes,
         gyr_axes=gyr_axes,
+        acc_clipped=acc_clipped,
+        gyr_clipped=gyr_clipped,
     )
-    return acc_in + acc_bias + acc_noise, gyr_in + gyr_bias + gyr_noise, applied
+    return acc_out, gyr_out, applied
