@@ -60,8 +60,9 @@ def _stream(
     t_shift_s: tuple[float, float] = (0.0, 0.0),
     stop_after: tuple[float, float] = (np.inf, np.inf),
     counting: Sequence[Callable[[NavBatch], object]] = (),
+    max_batch: int = 120,
 ) -> list[list[NavBatch]]:
-    """Feed both feet's samples in random batches (1-120 samples) in a random interleaving, each foot's
+    """Feed both feet's samples in random batches (1-``max_batch`` samples) in a random interleaving, each foot's
     time on its own session clock (``t_shift_s`` subtracted) and its host stamps from ``host0_ns`` on;
     a foot stops (and is ended) after ``stop_after`` seconds. Returns what each foot's sinks got
     (``counting``: one more sink per foot)."""
@@ -77,7 +78,7 @@ def _stream(
         if cursors[i] >= ends[i]:
             i = 1 - i
         a = cursors[i]
-        b = min(ends[i], a + int(rng.integers(1, 121)))
+        b = min(ends[i], a + int(rng.integers(max_batch // 4 + 1, max_batch + 1)))
         part = batches[i].select(slice(a, b))
         host = host0_ns[i] + np.round(part.t_s * 1e9).astype(np.int64)
         t = part.t_s - t_shift_s[i]
@@ -88,14 +89,18 @@ def _stream(
     return got
 
 
-@pytest.mark.parametrize("heading", [False, True])
-def test_any_interleaving_is_navigate_feet_bit_for_bit(figure8: tuple[FootSignals, FootSignals], heading: bool) -> None:
+@pytest.mark.parametrize(("heading", "max_batch"), [(False, 120), (True, 120), (False, 1000)])
+def test_any_interleaving_is_navigate_feet_bit_for_bit(
+    figure8: tuple[FootSignals, FootSignals], heading: bool, max_batch: int
+) -> None:
+    """Batches of up to 120 samples (a live read) and up to 1 s (a replay's, where the lockstep leaps
+    over the cells in which the feet stay inside the bound, and undoes a leap that comes near it)."""
     bound = FootSeparation(heading=RelativeHeading() if heading else None)
     ref = navigate_feet(figure8[0], figure8[1], coupling=bound)
     assert len(ref.heading_updates if heading else ref.corrections) > 3  # the heading keeps them within R
     for seed in (1, 2):
         lock = FeetLockstep(Navigator(NavConfig(), 1000.0), Navigator(NavConfig(), 1000.0), bound, clock="shared")
-        got = _stream(lock, figure8, np.random.default_rng(seed))
+        got = _stream(lock, figure8, np.random.default_rng(seed), max_batch=max_batch)
         assert lock.drained(0) and lock.drained(1)
         for est, want in zip(got, (ref.left, ref.right), strict=True):
             assert want is not None
@@ -106,6 +111,8 @@ def test_any_interleaving_is_navigate_feet_bit_for_bit(figure8: tuple[FootSignal
         assert lock.corrections == ref.corrections[: len(lock.corrections)]
         assert len(lock.corrections) == len(ref.corrections)
         np.testing.assert_array_equal(lock.distance_before_m, ref.distance_before_m)
+        if max_batch > 120:
+            assert lock.leaped_cells > 100 and lock.undone_leaps > 0
         if heading:
             assert lock.heading is not None and lock.heading.times_s == ref.heading_updates
 

@@ -12,6 +12,14 @@ arrivals does not change a bit of the result, so a replay of a capture (its read
 reproduces the live session unless the session released cells (below); ToF and barometer readings
 keep their place between a foot's IMU batches.
 
+Leaps. Most of the time the feet are well inside the bound and it does nothing; then navigating
+many cells in one call per foot gives the same bits as cell by cell (a navigator's result does not
+depend on how its samples are cut into batches). So when both feet have data for several cells
+ahead, and neither has a relative heading, ToF readings, readings in between or a lead-in being
+filled, the lockstep snapshots both navigators, navigates all those cells at once and checks the
+distance at each cell's end from the estimates: if it stayed ``LEAP_MARGIN_M`` inside R everywhere,
+the leap stands; otherwise both navigators are restored and the cells are navigated one by one.
+
 Clocks. Each foot's ``t_s`` is its own session time (its unit's clock from its first sample). With
 ``clock="host"`` a foot's time on the shared grid is τ = t + (h₀ − h_ref)/10⁹: h₀ the host receive
 time (ns) of its first IMU batch, h_ref the earliest of the two (a replay carries the captured host
@@ -39,6 +47,7 @@ among its forward batches, as one more batch earlier than those already given.
 
 from __future__ import annotations
 
+import copy
 import itertools
 import math
 from collections import deque
@@ -46,6 +55,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Literal, TypeAlias
 
+import numpy as np
 from footnav.pipeline.aiding.baro import PressureBatch
 from footnav.pipeline.aiding.tof_types import RangeBatch
 from footnav.pipeline.nav_types import NavBatch, concat_batches
@@ -94,6 +104,23 @@ LOCKSTEP_MAX_LEAD_S = 1.0
 of its data, s (a replay waits: the other foot's data is in the capture)."""
 FEET = ("left", "right")
 """The feet a session couples, by the names its feet have."""
+LEAP_MARGIN_M = 0.05
+"""A leap over several cells stands when the feet's distance at each cell's end, from the estimates
+of the cell's last samples, stayed this far inside R, m (module docstring): more than a stance level's
+update at a cell's end moves a foot horizontally."""
+LEAP_MAX_CELLS = 200
+"""The most cells one leap takes (10 s at the default step): what a failed leap navigates twice."""
+
+
+def _snapshot(nav: Navigator) -> dict[str, object]:
+    """A copy of everything ``nav`` holds (its configuration, immutable, shared)."""
+    return copy.deepcopy(nav.__dict__, {id(nav.config): nav.config})
+
+
+def _restore(nav: Navigator, state: dict[str, object]) -> None:
+    """Put ``nav`` back to a :func:`_snapshot` of it, in place (the session keeps the same object)."""
+    nav.__dict__.clear()
+    nav.__dict__.update(state)
 
 
 def lockstep_for(
@@ -172,6 +199,8 @@ class FeetLockstep:
         when (end of the cell, τ s) the bound was violated and applied, and the distance before, m.
     released_cells
         cells navigated without the bound because a foot's data lagged by more than ``max_lead_s``.
+    leaped_cells, undone_leaps
+        cells navigated in leaps (module docstring), and leaps undone because the feet came near R.
     heading : HeadingCoupler or None
         the relative heading's record (its ``times_s``), with ``bound.heading``.
     """
@@ -196,6 +225,9 @@ class FeetLockstep:
         self._t0: float | None = None
         self._ref_ns = 0
         self._k = 0
+        self._no_leap_before = 0
+        self.leaped_cells = 0
+        self.undone_leaps = 0
         self.corrections: list[float] = []
         self.distance_before_m: list[float] = []
         self.released_cells = 0
@@ -288,6 +320,8 @@ class FeetLockstep:
                 self._feed(f, e0)
             if all(f.ended and not f.items for f in feet):
                 break
+            if self._leap():
+                continue
             ready = [f.ended or f.reach >= e1 for f in feet]
             released = not all(ready)
             if released and not self._lead_release(ready):
@@ -302,6 +336,58 @@ class FeetLockstep:
             self._finish_lead_in(f)
             if f.out:
                 self._hand_on(f)
+
+    def _leap(self) -> bool:
+        """Navigate every whole cell both feet have data for in one call per foot, if the bound cannot
+        have acted in any of them (module docstring, "Leaps"); False, with nothing changed, if not."""
+        feet = self._feet
+        if (
+            self.heading is not None
+            or self._k < self._no_leap_before
+            or any(
+                f.ended
+                or f.offset_s is None
+                or (f.lead_in is not None and not f.lead_in.done)
+                or f.nav.tof.active
+                or any(not isinstance(item, ImuBatch) for item in f.items)
+                for f in feet
+            )
+        ):
+            return False
+        reach = min(f.reach for f in feet)
+        m = 0  # cells k .. k + m − 1 are whole for both feet
+        while m < LEAP_MAX_CELLS and self._edge(self._k + m + 1) <= reach:
+            m += 1
+        if m < 2:
+            return False
+        saved = [(_snapshot(f.nav), list(f.items), len(f.out)) for f in feet]
+        ends = self._t0 + self.bound.step_s * np.arange(self._k + 1, self._k + m + 1)  # as _edge
+        made = [self._feed(f, float(ends[-1])) for f in feet]
+        if self._inside_bound(made, ends):
+            self._k += m
+            self.leaped_cells += m
+            return True
+        for f, (state, items, n_out) in zip(feet, saved, strict=True):
+            _restore(f.nav, state)
+            f.items = deque(items)
+            del f.out[n_out:]
+        self._no_leap_before = self._k + m  # the bound is near: these cells one by one
+        self.undone_leaps += 1
+        return False
+
+    def _inside_bound(self, made: list[NavBatch | None], ends: np.ndarray) -> bool:
+        """Whether the feet's horizontal distance at each cell end ``ends`` (τ, s), from the estimates
+        ``made`` of both feet over those cells, stays ``LEAP_MARGIN_M`` inside R."""
+        xy = []
+        for f, est, origin in zip(self._feet, made, (self.bound.left_origin_m, self.bound.right_origin_m), strict=True):
+            if est is None or f.offset_s is None:
+                return False
+            last = np.searchsorted(est.t_s + f.offset_s, ends, side="left") - 1  # the last sample before each end
+            if last[0] < 0:
+                return False
+            xy.append(est.pos_n_m[last, :2] + np.asarray(origin[:2]))
+        d = np.hypot(xy[0][:, 0] - xy[1][:, 0], xy[0][:, 1] - xy[1][:, 1])
+        return bool(np.all(d < self.bound.max_m - LEAP_MARGIN_M))
 
     @staticmethod
     def _finish_lead_in(f: _Foot) -> None:
