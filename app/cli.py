@@ -44,7 +44,7 @@ def _export(args: argparse.Namespace) -> int:
         "stance_levels": args.stance_levels,
         "out_format": args.output_format,
     }
-    if args.left or args.right or args.independent_feet or args.couple_heading:
+    if args.left or args.right or args.independent_feet or args.distance_only:
         return _export_feet(args)
     if not args.input:
         raise FootnavError("what to export? give a recording, capture or folder (INPUT), or --left FILE --right FILE")
@@ -64,7 +64,7 @@ def _export_feet(args: argparse.Namespace) -> int:
 
     if not (args.left or args.right):
         raise FootnavError(
-            "--independent-feet and --couple-heading are for --left FILE --right FILE (a two-feet capture is "
+            "--independent-feet and --distance-only are for --left FILE --right FILE (a two-feet capture is "
             "exported with its feet coupled as its session had them)"
         )
     if not (args.left and args.right) or args.input:
@@ -80,7 +80,7 @@ def _export_feet(args: argparse.Namespace) -> int:
             args.left,
             args.right,
             args.output,
-            coupling=_feet_coupling(args) or "distance",
+            coupling=_feet_coupling_or_default(args),
             fmt=args.format,
             columns=args.columns,
             profile=args.profile,
@@ -108,7 +108,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     from footnav.app.commands.batch import scheduler_client
     from footnav.app.commands.evaluate import format_table, run_evaluate
 
-    if args.left or args.right or args.independent_feet or args.couple_heading:
+    if args.left or args.right or args.independent_feet or args.distance_only:
         return _evaluate_feet(args)
     if not args.paths:
         raise FootnavError("evaluate needs recordings (PATH ...), or a pair of them: --left FILE --right FILE")
@@ -133,13 +133,13 @@ def _evaluate_feet(args: argparse.Namespace) -> int:
         raise FootnavError("--smooth applies to one foot's recording; two feet are evaluated with the causal filter")
     if args.jobs is not None or args.scheduler:
         raise FootnavError("--jobs and --scheduler are for a folder or several files; two feet run in this process")
-    if args.couple_heading and args.independent_feet:
-        raise FootnavError("--couple-heading couples the feet; --independent-feet does not: give one of them")
+    if args.distance_only and args.independent_feet:
+        raise FootnavError("--distance-only couples the feet; --independent-feet does not: give one of them")
     rows = evaluate_pair(
         args.left,
         args.right,
         independent_only=args.independent_feet,
-        heading=args.couple_heading,
+        heading=not args.distance_only,
         stance_levels=args.stance_levels,
     )
     print(format_table(rows))
@@ -147,13 +147,20 @@ def _evaluate_feet(args: argparse.Namespace) -> int:
     return 0
 
 
+def _feet_coupling_or_default(args: argparse.Namespace, two_feet: bool = True) -> str:
+    """:func:`_feet_coupling`, or the default coupling when neither flag is given."""
+    from footnav.pipeline.two_feet.live import DEFAULT_FEET_COUPLING
+
+    return _feet_coupling(args, two_feet) or DEFAULT_FEET_COUPLING
+
+
 def _feet_coupling(args: argparse.Namespace, two_feet: bool = True) -> str | None:
-    """``--independent-feet`` / ``--couple-heading`` as a ``FEET_COUPLINGS`` name (None: neither given)."""
-    if args.couple_heading and args.independent_feet:
-        raise FootnavError("--couple-heading couples the feet; --independent-feet does not: give one of them")
-    given = "independent" if args.independent_feet else ("distance+heading" if args.couple_heading else None)
+    """``--independent-feet`` / ``--distance-only`` as a ``FEET_COUPLINGS`` name (None: neither given)."""
+    if args.distance_only and args.independent_feet:
+        raise FootnavError("--distance-only couples the feet; --independent-feet does not: give one of them")
+    given = "independent" if args.independent_feet else ("distance" if args.distance_only else None)
     if given is not None and not two_feet:
-        raise FootnavError("--independent-feet and --couple-heading are for two feet (--left and --right, --feet 2)")
+        raise FootnavError("--independent-feet and --distance-only are for two feet (--left and --right, --feet 2)")
     return given
 
 
@@ -214,7 +221,7 @@ def _live(args: argparse.Namespace, argv: list[str]) -> int:
             output=args.mode,
             model=args.unit,
             lsl=_lsl(args),
-            feet_coupling=_feet_coupling(args, two_feet=len(ports) == 2) or "distance",
+            feet_coupling=_feet_coupling_or_default(args, two_feet=len(ports) == 2),
         )
     )
 
@@ -320,7 +327,7 @@ def _replay_recording(args: argparse.Namespace) -> int:
         "--stance": args.stance is not None,
         "--config": args.config is not None,
         "--independent-feet": args.independent_feet,
-        "--couple-heading": args.couple_heading,
+        "--distance-only": args.distance_only,
     }
     _only_for(args, capture_only, "a recording from another tool, navigated whole")
     if args.smooth and args.step_smoothing:
@@ -381,7 +388,7 @@ def _demo(args: argparse.Namespace) -> int:
             unit=args.unit,
             mode=args.mode,
             lsl=_lsl(args),
-            feet_coupling=_feet_coupling(args, two_feet=args.feet == 2) or "distance",
+            feet_coupling=_feet_coupling_or_default(args, two_feet=args.feet == 2),
         )
     )
 

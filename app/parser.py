@@ -152,12 +152,12 @@ def _add_feet_coupling_args(p: argparse.ArgumentParser, *, default: str) -> argp
     feet.add_argument(
         "--independent-feet",
         action="store_true",
-        help="navigate each foot on its own (default: the feet's filters coupled by the inter-foot distance bound)",
+        help="navigate each foot on its own (default: coupled by the inter-foot distance bound and relative heading)",
     )
     feet.add_argument(
-        "--couple-heading",
+        "--distance-only",
         action="store_true",
-        help="couple the feet's headings in stance too (experimental; see `footnav evaluate --couple-heading`)",
+        help="couple the feet by the inter-foot distance bound alone, not by their relative heading in stance too",
     )
     return feet
 
@@ -523,14 +523,14 @@ def _add_evaluate_command(sub: Commands) -> None:
     feet.add_argument(
         "--independent-feet",
         action="store_true",
-        help="navigate the two feet independently only (default: coupled by the inter-foot distance bound, "
-        "and independently for comparison)",
+        help="navigate the two feet independently only (default: coupled by the inter-foot distance bound and "
+        "relative heading, and independently for comparison)",
     )
     feet.add_argument(
-        "--couple-heading",
+        "--distance-only",
         action="store_true",
-        help="couple the feet's headings in stance too (experimental: -32 %% mean error on emulated walks with "
-        "axis errors, but +12 %% on those without them)",
+        help="couple the feet by the inter-foot distance bound alone (default: and by their relative heading in "
+        "stance, when it is off by more than its band)",
     )
     _add_jobs_arg(evaluate)
 

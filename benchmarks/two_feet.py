@@ -1,24 +1,24 @@
 """Two feet coupled (distance bound, relative heading) against two independent feet, on emulated walks.
 
-    .venv/bin/python -m benchmarks.two_feet [--seeds 4] [--duration 90] [--courses rectangle,...]
+    .venv/bin/python -m benchmarks.two_feet [--seeds 4] [--first-seed 1] [--duration 90] [--courses rectangle,...]
         [--axes none,gyro-bias-calibrated] [--bounds 1.2] [--variants default,distance,heading]
-        [--heading-sigma 4] [--heading-drift 0] [--heading-drift-per-turn 0.02]
+        [--heading-sigma 4] [--heading-drift 0] [--heading-drift-per-turn 0.02] [--heading-band 0]
 
 Each course (rectangle, figure-eight, line, stairs; ``--courses`` a subset) and seed is walked by two
 emulated feet (``two_feet_walks``), each given its own errors of the MPU-6500 x4 grade (biases, bias
 instability, noise), without and with the axis errors ``gyro-bias-calibrated`` (the datasheet's
-gyroscope scale and cross-axis errors, which make the heading drift; ``--axes`` one of them). Both
-feet are navigated independently and coupled (``footnav.pipeline.two_feet``) by each variant of
-``--variants`` with each bound R of ``--bounds``: ``default`` the default ``FootSeparation`` with R
-(the bound and the relative heading), ``distance`` the distance bound alone, ``heading`` the relative
-heading constraint alone (σ, drift per stride and per turn from ``--heading-sigma``,
-``--heading-drift`` in degrees, ``--heading-drift-per-turn``), ``distance+heading`` both (those σ and
-drifts). Printed per walk: each foot's final and mean-along-the-walk horizontal error, independent
-and coupled (the first variant and R), and the change of the two feet's mean error in %; then per
-axis errors, course (and all courses) and variant the mean over the walks, its change, the worst
-change of one walk, the noise (the SD over the seeds of the independent error: what changing the
-IMU's error draw alone does), how many walks got worse by more than 1 cm, and the runtime ratio
-coupled / independent.
+gyroscope scale and cross-axis errors, which make the heading drift; ``--axes`` one of them). Both feet
+are navigated independently and coupled (``footnav.pipeline.two_feet``) by each variant of
+``--variants`` with each bound R of ``--bounds``: ``default`` the default ``FootSeparation`` with R (the
+bound and the relative heading), ``distance`` the distance bound alone, ``heading`` the relative heading
+constraint alone (σ, drift per stride and per turn from ``--heading-sigma``, ``--heading-drift`` in
+degrees, ``--heading-drift-per-turn``, the band ``--heading-band`` in degrees), ``distance+heading``
+both (those σ, drifts and band). Printed per walk: each foot's final and mean-along-the-walk horizontal
+error, independent and coupled (the first variant and R), and the change of the two feet's mean error in
+%; then per axis errors, course (and all courses) and variant the mean over the walks, its change, the
+worst change of one walk, the noise (the SD over the seeds of the independent error: what changing the
+IMU's error draw alone does), how many walks got worse by more than 1 cm, and the runtime ratio coupled
+/ independent.
 """
 
 from __future__ import annotations
@@ -125,6 +125,7 @@ def summarize(summary: dict[tuple[str, str, str], list[tuple[float, float, float
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=4)
+    ap.add_argument("--first-seed", type=int, default=1)
     ap.add_argument("--duration", type=float, default=90.0)
     ap.add_argument("--courses", default=",".join(COURSES), help="comma-separated, of " + ", ".join(COURSES))
     ap.add_argument("--axes", default=",".join(AXES), help="axis errors, comma-separated, of " + ", ".join(AXES))
@@ -133,6 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--heading-sigma", type=float, default=None, help="σ of the relative heading, degrees")
     ap.add_argument("--heading-drift", type=float, default=None, help="heading drift per stride, degrees")
     ap.add_argument("--heading-drift-per-turn", type=float, default=None, help="heading drift per turn")
+    ap.add_argument("--heading-band", type=float, default=None, help="the relative heading's band, degrees")
     args = ap.parse_args(argv)
     bounds = [float(b) for b in args.bounds.split(",")]
     heading = RelativeHeading()
@@ -142,6 +144,8 @@ def main(argv: list[str] | None = None) -> int:
         heading = dataclasses.replace(heading, drift_rad=math.radians(args.heading_drift))
     if args.heading_drift_per_turn is not None:
         heading = dataclasses.replace(heading, drift_per_turn=args.heading_drift_per_turn)
+    if args.heading_band is not None:
+        heading = dataclasses.replace(heading, band_rad=math.radians(args.heading_band))
     variants = couplings(args.variants.split(","), bounds, heading)
     courses, axes_list = args.courses.split(","), args.axes.split(",")
     if not set(courses) <= set(COURSES) or not set(axes_list) <= set(AXES):
@@ -156,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     for axes in axes_list:
         tag = "none" if axes == "none" else "axes"
         for course in courses:
-            for seed in range(1, args.seeds + 1):
+            for seed in range(args.first_seed, args.first_seed + args.seeds):
                 r = run(course, seed, args.duration, axes, variants)
                 fl, fr, ml, mr, ti, _ = r["ind"]
                 ind_mean = 0.5 * (ml + mr)

@@ -121,7 +121,7 @@ def test_host_times_put_session_clocks_on_one_grid(figure8: tuple[FootSignals, F
     """Each unit's session clock starts at its own first sample: the right foot's stream starts 0.3 s
     late on the host, so its session time is 0.3 s behind; matched by host time the result is the
     lockstep on the shared clock (to rounding), with every time stamp the foot's own."""
-    bound = FootSeparation()
+    bound = FootSeparation(heading=None)  # the bound alone: it acts on this walk
     shared = FeetLockstep(Navigator(NavConfig(), 1000.0), Navigator(NavConfig(), 1000.0), bound, clock="shared")
     want = _stream(shared, figure8, np.random.default_rng(3))
     late = 0.3
@@ -197,7 +197,7 @@ def test_each_coupled_foot_fills_its_lead_in_in_on_its_own(walk_then_figure8: tu
     alone (the lead-in is not coupled, and it meets the forward track at its first sample, which no
     correction has touched); the forward estimates stay ``navigate_feet``'s bit for bit, which equal the
     uncoupled run's up to the bound's first correction and differ after it."""
-    bound = FootSeparation()
+    bound = FootSeparation(heading=None)
     ref = navigate_feet(walk_then_figure8[0], walk_then_figure8[1], coupling=bound)
     lock = FeetLockstep(Navigator(NavConfig(), 1000.0), Navigator(NavConfig(), 1000.0), bound, clock="shared")
     lead_ins: list[list[tuple[int, NavBatch]]] = [[], []]
@@ -294,7 +294,7 @@ def test_demo_couples_the_feet_as_the_lockstep_does(coupled_demo: tuple[Path, di
     assert read_capture_info(capture).session["feet_coupling"] == "distance"
     cfg, samples, rates = _samples(capture)
     navs = [Navigator(cfg.nav_config(), rates[f]) for f in ("left", "right")]
-    lock = FeetLockstep(navs[0], navs[1], FootSeparation())
+    lock = FeetLockstep(navs[0], navs[1], FootSeparation(heading=None))  # the demo's "distance"
     got: list[list[NavBatch]] = [[], []]
     for i, foot in enumerate(("left", "right")):
         lock.port(i).bind_sinks([got[i].append])
@@ -359,7 +359,7 @@ def _write_csv(path: Path, t_s: np.ndarray, acc: np.ndarray, gyr: np.ndarray) ->
                header="t,ax,ay,az,gx,gy,gz", comments="")  # fmt: skip
 
 
-@pytest.mark.parametrize("coupling", ["distance", "independent"])
+@pytest.mark.parametrize("coupling", ["coupled", "independent"])
 def test_export_of_a_pair_writes_navigate_pairs_tracks(
     tmp_path: Path, figure8: tuple[FootSignals, FootSignals], coupling: str
 ) -> None:
@@ -372,8 +372,8 @@ def test_export_of_a_pair_writes_navigate_pairs_tracks(
         code = main(["export", "--left", str(paths[0]), "--right", str(paths[1]), "-o", str(tmp_path / "t.parquet"),
                      *flags])  # fmt: skip
     assert code == 0
-    ref = navigate_pair(load_recording(paths[0]), load_recording(paths[1]), coupled=coupling == "distance")
-    assert (len(ref.corrections) > 0) == (coupling == "distance")
+    ref = navigate_pair(load_recording(paths[0]), load_recording(paths[1]), coupled=coupling == "coupled")
+    assert (len(ref.heading_updates) > 0) == (coupling == "coupled")
     assert ("independent" in out.getvalue()) == (coupling == "independent")
     for foot, nav in (("left", ref.left), ("right", ref.right)):
         assert nav is not None

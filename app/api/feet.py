@@ -51,7 +51,8 @@ def navigate_pair(
     coupled : bool
         Apply the inter-foot distance bound; False navigates the feet independently.
     bound : FootSeparation, optional
-        The bound R (default ``DEFAULT_MAX_SEPARATION_M``), its noise and the feet's start positions.
+        The bound R (default ``DEFAULT_MAX_SEPARATION_M``), its noise, the feet's start positions and the
+        relative heading constraint (default: on; ``heading=None`` the bound alone).
     stance_levels : bool
         Use the stance height levels (``footnav.pipeline.stance.levels``), as ``navigate`` does.
     profile : str, optional
@@ -90,7 +91,7 @@ def export_pair(
     right: Path,
     out: Path,
     *,
-    coupling: str = "distance",
+    coupling: str = "distance+heading",
     fmt: str | None = None,
     columns: str | None = None,
     profile: str | None = None,

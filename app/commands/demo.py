@@ -130,7 +130,7 @@ class DemoOptions:
     lsl: LslRequest | None = None
     """``--lsl``: the estimates on Lab Streaming Layer too (:mod:`footnav.views.lsl`), as from a unit
     named ``emulator``."""
-    feet_coupling: str = "distance"
+    feet_coupling: str = "distance+heading"
     """Two feet: coupled by the distance bound, with the relative heading too, or independent
     (``footnav.pipeline.two_feet.live.FEET_COUPLINGS``)."""
     initial_still_s: float = 3.0

@@ -124,11 +124,11 @@ def score(
 
 
 def evaluate_pair(
-    left: Path, right: Path, *, independent_only: bool = False, heading: bool = False, stance_levels: bool = True
+    left: Path, right: Path, *, independent_only: bool = False, heading: bool = True, stance_levels: bool = True
 ) -> list[Evaluation]:
     """A left and a right recording navigated together (``footnav.app.api.feet.navigate_pair``), each foot
     measured as :func:`evaluate_file` measures one: coupled by the inter-foot distance bound (and, when
-    ``heading``, their relative heading in stance: ``footnav.pipeline.two_feet.heading``), then independent
+    ``heading``, the default, their relative heading in stance: ``footnav.pipeline.two_feet.heading``), then independent
     (only independent when ``independent_only``).
 
     Raises

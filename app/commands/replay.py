@@ -159,7 +159,7 @@ def checked_summary(opts: ReplayOptions) -> CaptureSummary:
             f"`footnav calibrate --capture {opts.path}`"
         )
     if opts.feet_coupling is not None and len(info.units) != 2:
-        raise FootnavError(f"--independent-feet and --couple-heading are for two feet; {opts.path} holds one")
+        raise FootnavError(f"--independent-feet and --distance-only are for two feet; {opts.path} holds one")
     for warning in info.warnings:
         notice(warning)
     if summary.gaps:

@@ -282,7 +282,7 @@ def foot_to_foot_errors(course: str, seed: int, setup: BoardSetup, config: NavCo
             full_scale=setup.full_scale,
         )
         signals.append(FootSignals(truth.t_s, acc, gyr, truth.rate_hz))
-    result = navigate_feet(signals[0], signals[1], config, FootSeparation())
+    result = navigate_feet(signals[0], signals[1], config, FootSeparation(heading=None))  # the bound alone
     left = feet[0].pos_n_m
     err = np.full(left.shape[0], np.nan)
     if result.left is not None:

@@ -70,6 +70,12 @@ class RelativeHeading:
         above this (a turn starts or ends: the midpoint model is off by up to m), rad.
     settle_s
         the measurement is taken once in each stance, when the foot has stood still this long, s.
+    band_rad
+        b, the constraint as an inequality |y| ≤ b + m (m the midpoint model's error bound): a stance
+        whose innovation is inside it changes nothing (no drift raise, no update); outside, the
+        update pulls to the band's edge, y − sign(y)(b + m); 0 applies it at every stance (an
+        equality), rad. 0.1°: the smallest band that left every emulated walk without axis errors
+        unchanged (design page "Estimator").
     drift_rad, drift_per_turn
         1σ of the heading drift per stride that the filter's own model lacks, q = hypot(q₀, k |Δψ|),
         q₀ rad and k times the foot's turn Δψ since its last measured stance, added to its yaw variance
@@ -80,6 +86,7 @@ class RelativeHeading:
 
     sigma_rad: float = math.radians(4.0)
     offset_rad: float = 0.0
+    band_rad: float = math.radians(0.1)
     turn_gate_rad: float = math.radians(10.0)
     settle_s: float = 0.1
     drift_rad: float = 0.0
@@ -166,29 +173,47 @@ class HeadingCoupler:
         for a in sorted(settled, key=lambda a: self._feet[a].run_start_s):
             foot, other = self._feet[a], self._feet[1 - a]
             psi_a = _heading(navs[a])
-            drift = math.hypot(self.config.drift_rad, self.config.drift_per_turn * foot.turn_to(psi_a))
-            if drift > 0.0:
-                navs[a].add_error_variance(YAW_INDEX, drift**2)
+            turn = foot.turn_to(psi_a)
             ready = len(foot.headings) > 0 and len(other.headings) > 1
             foot.record(psi_a)
-            if ready:
-                self._apply(navs[a], navs[1 - a], foot, other, 1.0 if a == 0 else -1.0, t)
+            meas = self._measurement(foot, other, 1.0 if a == 0 else -1.0) if ready else None
+            band = 0.0
+            if self.config.band_rad > 0.0:
+                if meas is None or abs(meas[0]) <= self.config.band_rad + meas[2]:
+                    continue  # inside the band: nothing to correct
+                band = self.config.band_rad + meas[2]
+            drift = math.hypot(self.config.drift_rad, self.config.drift_per_turn * turn)
+            if drift > 0.0:
+                navs[a].add_error_variance(YAW_INDEX, drift**2)
+            if meas is not None:
+                y, var, _ = meas
+                self._apply(navs[a], navs[1 - a], foot, other, y - math.copysign(band, y), var, t)
 
-    def _apply(
-        self, nav_a: Navigator, nav_b: Navigator, foot: _FootStance, other: _FootStance, sign: float, t_s: float
-    ) -> None:
-        """The measurement at a settled stance of foot a (``sign`` +1 left, −1 right) against the other
-        foot's last stance, the other foot's foothold taken half way through foot a's stride turn."""
+    def _measurement(self, foot: _FootStance, other: _FootStance, sign: float) -> tuple[float, float, float] | None:
+        """Innovation y, its variance σ_ψ² + m² and m, rad, at a settled stance of foot a (``sign`` +1
+        left, −1 right) against the other foot's last stance, the other foot's foothold taken half way
+        through foot a's stride turn; None when the two feet's turns differ by more than the gate."""
         cfg = self.config
         psi_prev, psi_a = foot.headings
         turn_a = wrap_rad(psi_a - psi_prev)
         turn_b = wrap_rad(other.headings[-1] - other.headings[-2])
         mismatch = 0.5 * abs(turn_a - turn_b)
         if mismatch > cfg.turn_gate_rad:
-            return
+            return None
         predicted = wrap_rad(psi_a - other.headings[-1] - 0.5 * turn_a)
-        y = wrap_rad(sign * cfg.offset_rad - predicted)
-        var = cfg.sigma_rad**2 + mismatch**2
+        return wrap_rad(sign * cfg.offset_rad - predicted), cfg.sigma_rad**2 + mismatch**2, mismatch
+
+    def _apply(
+        self,
+        nav_a: Navigator,
+        nav_b: Navigator,
+        foot: _FootStance,
+        other: _FootStance,
+        y: float,
+        var: float,
+        t_s: float,
+    ) -> None:
+        """The update of both feet's yaw with innovation ``y`` and measurement variance ``var``, rad²."""
         cov_a, cov_b = nav_a.error_cov, nav_b.error_cov
         assert cov_a is not None and cov_b is not None
         h = np.zeros(eskf.N_STATE)

@@ -12,29 +12,23 @@ arrivals does not change a bit of the result, so a replay of a capture (its read
 reproduces the live session unless the session released cells (below); ToF and barometer readings
 keep their place between a foot's IMU batches.
 
-Leaps. Most of the time the feet are well inside the bound and it does nothing; then navigating
-many cells in one call per foot gives the same bits as cell by cell (a navigator's result does not
-depend on how its samples are cut into batches). So when both feet have data for several cells
-ahead, and neither has a relative heading, ToF readings, readings in between or a lead-in being
-filled, the lockstep snapshots both navigators, navigates all those cells at once and checks the
-distance at each cell's end from the estimates: if it stayed ``LEAP_MARGIN_M`` inside R everywhere,
-the leap stands; otherwise both navigators are restored and the cells are navigated one by one.
+Leaps: with the bound alone, when both feet have data for several cells (no ToF or other readings
+among them, no lead-in being filled), both navigators are copied, the cells navigated in one call per
+foot, and the leap stands if the feet stayed ``LEAP_MARGIN_M`` inside R at every cell end; else the
+copies are put back and the cells go one by one: bit for bit, as batching does not change a result.
 
-Clocks. Each foot's ``t_s`` is its own session time (its unit's clock from its first sample). With
-``clock="host"`` a foot's time on the shared grid is τ = t + (h₀ − h_ref)/10⁹: h₀ the host receive
-time (ns) of its first IMU batch, h_ref the earliest of the two (a replay carries the captured host
-times, so it finds the same offsets). The match is as good as the first read's latency difference,
-about a read interval (10 ms): a swinging foot moves 4 cm in that, within the margin of R over a
-step. Unit clock drift (tens of ppm: ms per minute) is not followed. ``clock="shared"`` takes the
-``t_s`` as one clock already (two recordings of one logger).
+Clocks. Each foot's ``t_s`` is its own session time. With ``clock="host"`` a foot's time on the grid
+is τ = t + (h₀ − h_ref)/10⁹: h₀ the host receive time (ns) of its first IMU batch, h_ref the earliest
+of the two (a replay carries the captured host times, so it finds the same offsets); as good as the
+first reads' latency difference, about 10 ms, in which a swinging foot moves 4 cm. Unit clock drift
+is not followed. ``clock="shared"`` takes the ``t_s`` as one clock (two recordings of one logger).
 
 A foot whose data stops (a link stall) would hold the other's estimates back; with ``max_lead_s``
 a cell is navigated for the foot that has data once it is that far ahead of the other, without the
 bound (counted in ``released_cells``), and the late foot's samples are navigated alone until it is
 back on the grid. Which cells are released depends on when the data arrived, which a capture does not
 keep: its replay waits (``max_lead_s=None``) and couples them. The bound is not applied in a cell a foot
-had ended before. All calls come from one thread (the stage runner's event loop; the navigators run
-there, not in executors), so nothing is locked.
+had ended before. All calls come from one thread (the stage runner's event loop): nothing is locked.
 
 Lead-in. A foot whose walk starts in motion aligns on its first still period; with
 :meth:`LockstepPort.fill_lead_in` its samples before it are kept and navigated backwards once that
@@ -71,9 +65,11 @@ NavSink = Callable[[NavBatch], object]
 
 
 FEET_COUPLINGS = ("distance", "distance+heading", "independent")
-"""How a session's two feet are navigated: the distance bound (the default), with the relative heading
-(``--couple-heading``), or each on its own (``--independent-feet``); kept in the capture's session
-record (``feet_coupling``) so that a replay does the same."""
+"""How a session's two feet are navigated: the distance bound alone (``--distance-only``), with the
+relative heading (the default), or each on its own (``--independent-feet``); kept in the capture's
+session record (``feet_coupling``) so that a replay does the same."""
+DEFAULT_FEET_COUPLING = "distance+heading"
+"""The coupling of two feet unless a flag says otherwise (design page "Estimator", "Two feet coupled")."""
 
 
 def coupling_bound(coupling: str) -> FootSeparation | None:
@@ -360,6 +356,7 @@ class FeetLockstep:
             m += 1
         if m < 2:
             return False
+        assert self._t0 is not None  # placed: every foot has an offset
         saved = [(_snapshot(f.nav), list(f.items), len(f.out)) for f in feet]
         ends = self._t0 + self.bound.step_s * np.arange(self._k + 1, self._k + m + 1)  # as _edge
         made = [self._feed(f, float(ends[-1])) for f in feet]

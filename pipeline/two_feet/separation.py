@@ -52,6 +52,10 @@ RIGHT_ORIGIN_M = (0.0, -0.1, 0.0)
 """Where the right foot's IMU starts, m (``LEFT_ORIGIN_M``)."""
 
 
+DEFAULT_HEADING = RelativeHeading()
+"""The relative heading constraint that ``FootSeparation`` applies by default."""
+
+
 @dataclass(frozen=True, slots=True)
 class FootSeparation:
     """The inter-foot distance bound.
@@ -68,9 +72,8 @@ class FootSeparation:
         each foot's start position (3,) in a frame both navigation frames share (the feet start
         parallel and still: each navigator's frame has its x along its own foot), m.
     heading
-        the relative heading constraint applied with the bound (``footnav.pipeline.two_feet.heading``),
-        or None for the bound alone (the default: with it walks without axis errors get up to 0.6 cm
-        worse, beyond their spread over seeds; design page "Estimator").
+        the relative heading constraint applied with the bound (``footnav.pipeline.two_feet.heading``;
+        the default), or None for the bound alone.
     """
 
     max_m: float = DEFAULT_MAX_SEPARATION_M
@@ -78,7 +81,7 @@ class FootSeparation:
     step_s: float = 0.05
     left_origin_m: tuple[float, float, float] = LEFT_ORIGIN_M
     right_origin_m: tuple[float, float, float] = RIGHT_ORIGIN_M
-    heading: RelativeHeading | None = None
+    heading: RelativeHeading | None = DEFAULT_HEADING
 
 
 def horizontal_separation(left: Navigator, right: Navigator, bound: FootSeparation) -> F64 | None:
