@@ -89,7 +89,7 @@ def _stream(
     return got
 
 
-@pytest.mark.parametrize(("heading", "max_batch"), [(False, 120), (True, 120), (False, 1000)])
+@pytest.mark.parametrize(("heading", "max_batch"), [(False, 120), (True, 120), (False, 1000), (True, 1000)])
 def test_any_interleaving_is_navigate_feet_bit_for_bit(
     figure8: tuple[FootSignals, FootSignals], heading: bool, max_batch: int
 ) -> None:

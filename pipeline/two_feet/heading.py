@@ -40,9 +40,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
-from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.navigation import eskf
 from footnav.pipeline.navigation.navigator import Navigator
 from numpy.typing import NDArray
@@ -104,20 +104,33 @@ def wrap_rad(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
+class StepEstimates(Protocol):
+    """What the constraint reads of a foot's estimates over one lockstep step (a ``NavBatch`` has it)."""
+
+    @property
+    def t_s(self) -> F64: ...
+    @property
+    def stance(self) -> NDArray[np.bool_]: ...
+    @property
+    def quat_nb_wxyz(self) -> F64: ...
+
+
 @dataclass
 class _FootStance:
     """One foot's stance bookkeeping: the start of its current still run, whether this stance was
-    measured, and its heading in its last two measured stances (as the filter now estimates them:
-    the constraint's corrections are added to them)."""
+    measured, the heading of its latest estimate and in its last two measured stances (as the filter
+    now estimates them: the constraint's corrections are added to them)."""
 
     run_start_s: float = math.nan
     taken: bool = False
+    psi_rad: float = math.nan
     headings: list[float] = field(default_factory=list)
 
-    def observe(self, est: NavBatch | None) -> None:
-        """Follow the still run to the end of ``est``."""
+    def observe(self, est: StepEstimates | None) -> None:
+        """Follow the still run and the heading to the end of ``est``."""
         if est is None or len(est.t_s) == 0:
             return
+        self.psi_rad = heading_rad(est.quat_nb_wxyz[-1])
         if not est.stance[-1]:
             self.run_start_s, self.taken = math.nan, False
             return
@@ -139,11 +152,16 @@ class _FootStance:
         self.headings = [*self.headings[-1:], psi_rad]
 
     def corrected(self, dpsi_rad: float) -> None:
+        self.psi_rad += dpsi_rad
         self.headings = [h + dpsi_rad for h in self.headings]
 
 
 class HeadingCoupler:
     """Applies ``RelativeHeading`` between two navigators running in lockstep (module docstring).
+
+    A foot's heading is read from its latest estimate (the last sample's attitude, with the corrections
+    applied since), so the constraint sees the same values whether the lockstep navigated each step or
+    several at once (``footnav.pipeline.two_feet.live``, "Leaps").
 
     Attributes
     ----------
@@ -158,21 +176,30 @@ class HeadingCoupler:
         self.innovations_rad: list[float] = []
         self.sigmas_rad: list[float] = []
 
-    def after_batch(self, left: Navigator, est_l: NavBatch | None, right: Navigator, est_r: NavBatch | None) -> None:
-        """Follow both feet's stances through their latest estimates and apply the measurement for
-        each foot that has just settled."""
+    def after_batch(
+        self,
+        left: Navigator,
+        est_l: StepEstimates | None,
+        right: Navigator,
+        est_r: StepEstimates | None,
+        *,
+        dry: bool = False,
+    ) -> bool:
+        """Follow both feet's stances through their estimates of one step and apply the measurement for
+        each foot that has just settled. ``dry``: apply nothing, and return False (the bookkeeping then
+        half done) as soon as a measurement would be applied; True otherwise."""
         for foot, est in zip(self._feet, (est_l, est_r), strict=True):
             foot.observe(est)
         navs = (left, right)
-        if left.state is None or right.state is None or (est_l is None and est_r is None):
-            return
+        if math.isnan(self._feet[0].psi_rad) or math.isnan(self._feet[1].psi_rad) or (est_l is None and est_r is None):
+            return True
         t = max(float(e.t_s[-1]) for e in (est_l, est_r) if e is not None)
         settled = [a for a in (0, 1) if self._feet[a].settled(t, self.config.settle_s)]
         # in the order the feet landed: a foot is measured against the other foot's stance that began
         # before its own, also when both settle in one batch
         for a in sorted(settled, key=lambda a: self._feet[a].run_start_s):
             foot, other = self._feet[a], self._feet[1 - a]
-            psi_a = _heading(navs[a])
+            psi_a = foot.psi_rad
             turn = foot.turn_to(psi_a)
             ready = len(foot.headings) > 0 and len(other.headings) > 1
             foot.record(psi_a)
@@ -182,12 +209,15 @@ class HeadingCoupler:
                 if meas is None or abs(meas[0]) <= self.config.band_rad + meas[2]:
                     continue  # inside the band: nothing to correct
                 band = self.config.band_rad + meas[2]
+            if dry:
+                return False
             drift = math.hypot(self.config.drift_rad, self.config.drift_per_turn * turn)
             if drift > 0.0:
                 navs[a].add_error_variance(YAW_INDEX, drift**2)
             if meas is not None:
                 y, var, _ = meas
                 self._apply(navs[a], navs[1 - a], foot, other, y - math.copysign(band, y), var, t)
+        return True
 
     def _measurement(self, foot: _FootStance, other: _FootStance, sign: float) -> tuple[float, float, float] | None:
         """Innovation y, its variance σ_ψ² + m² and m, rad, at a settled stance of foot a (``sign`` +1

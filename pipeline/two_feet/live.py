@@ -12,10 +12,10 @@ arrivals does not change a bit of the result, so a replay of a capture (its read
 reproduces the live session unless the session released cells (below); ToF and barometer readings
 keep their place between a foot's IMU batches.
 
-Leaps: with the bound alone, when both feet have data for several cells (no ToF or other readings
-among them, no lead-in being filled), both navigators are copied, the cells navigated in one call per
-foot, and the leap stands if the feet stayed ``LEAP_MARGIN_M`` inside R at every cell end; else the
-copies are put back and the cells go one by one: bit for bit, as batching does not change a result.
+Leaps: when both feet are aligned and have data for several cells (no other readings, no lead-in
+being filled), both navigators are copied and navigate the cells in one call each; the leap stands if
+the feet stayed ``LEAP_MARGIN_M`` inside R at every cell end and the relative heading (banded) had
+nothing to correct, else the copies are put back and the cells go one by one: bit for bit.
 
 Clocks. Each foot's ``t_s`` is its own session time. With ``clock="host"`` a foot's time on the grid
 is τ = t + (h₀ − h_ref)/10⁹: h₀ the host receive time (ns) of its first IMU batch, h_ref the earliest
@@ -47,7 +47,7 @@ import math
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Literal, TypeAlias
+from typing import Literal, NamedTuple, TypeAlias
 
 import numpy as np
 from footnav.pipeline.aiding.baro import PressureBatch
@@ -58,7 +58,9 @@ from footnav.pipeline.navigation.navigator import Navigator, NavStats
 from footnav.pipeline.samples import ImuBatch
 from footnav.pipeline.two_feet.heading import HeadingCoupler, RelativeHeading
 from footnav.pipeline.two_feet.separation import FootSeparation, apply_separation
+from numpy.typing import NDArray
 
+F64 = NDArray[np.float64]
 Item: TypeAlias = ImuBatch | RangeBatch | PressureBatch
 NavSink = Callable[[NavBatch], object]
 """Where a foot's estimates go (``footnav.pipeline.runner.NavSink``, not imported: the runner knows asyncio)."""
@@ -106,6 +108,14 @@ of the cell's last samples, stayed this far inside R, m (module docstring): more
 update at a cell's end moves a foot horizontally."""
 LEAP_MAX_CELLS = 200
 """The most cells one leap takes (10 s at the default step): what a failed leap navigates twice."""
+
+
+class _Step(NamedTuple):
+    """A foot's estimates over one cell of a leap, as the relative heading reads them."""
+
+    t_s: F64
+    stance: NDArray[np.bool_]
+    quat_nb_wxyz: F64
 
 
 def _snapshot(nav: Navigator) -> dict[str, object]:
@@ -338,11 +348,12 @@ class FeetLockstep:
         have acted in any of them (module docstring, "Leaps"); False, with nothing changed, if not."""
         feet = self._feet
         if (
-            self.heading is not None
+            (self.heading is not None and self.heading.config.band_rad <= 0.0)  # it acts at every stance
             or self._k < self._no_leap_before
             or any(
                 f.ended
                 or f.offset_s is None
+                or f.nav.state is None  # each cell's estimates are then exactly its samples'
                 or (f.lead_in is not None and not f.lead_in.done)
                 or f.nav.tof.active
                 or any(not isinstance(item, ImuBatch) for item in f.items)
@@ -358,12 +369,15 @@ class FeetLockstep:
             return False
         assert self._t0 is not None  # placed: every foot has an offset
         saved = [(_snapshot(f.nav), list(f.items), len(f.out)) for f in feet]
+        heading = copy.deepcopy(self.heading)
         ends = self._t0 + self.bound.step_s * np.arange(self._k + 1, self._k + m + 1)  # as _edge
         made = [self._feed(f, float(ends[-1])) for f in feet]
-        if self._inside_bound(made, ends):
+        last = self._last_before(made, ends)
+        if last is not None and self._inside_bound(made, last) and self._heading_idle(made, last):
             self._k += m
             self.leaped_cells += m
             return True
+        self.heading = heading
         for f, (state, items, n_out) in zip(feet, saved, strict=True):
             _restore(f.nav, state)
             f.items = deque(items)
@@ -372,19 +386,46 @@ class FeetLockstep:
         self.undone_leaps += 1
         return False
 
-    def _inside_bound(self, made: list[NavBatch | None], ends: np.ndarray) -> bool:
-        """Whether the feet's horizontal distance at each cell end ``ends`` (τ, s), from the estimates
-        ``made`` of both feet over those cells, stays ``LEAP_MARGIN_M`` inside R."""
-        xy = []
-        for f, est, origin in zip(self._feet, made, (self.bound.left_origin_m, self.bound.right_origin_m), strict=True):
+    def _last_before(self, made: list[NavBatch | None], ends: np.ndarray) -> list[np.ndarray] | None:
+        """Per foot, the index in its estimates ``made`` of the last sample before each cell end ``ends``
+        (τ, s); None when a foot has none before the first end."""
+        last = []
+        for f, est in zip(self._feet, made, strict=True):
             if est is None or f.offset_s is None:
-                return False
-            last = np.searchsorted(est.t_s + f.offset_s, ends, side="left") - 1  # the last sample before each end
-            if last[0] < 0:
-                return False
-            xy.append(est.pos_n_m[last, :2] + np.asarray(origin[:2]))
+                return None
+            i = np.searchsorted(est.t_s + f.offset_s, ends, side="left") - 1
+            if i[0] < 0:
+                return None
+            last.append(i)
+        return last
+
+    def _inside_bound(self, made: list[NavBatch | None], last: list[np.ndarray]) -> bool:
+        """Whether the feet's horizontal distance at each cell end, from the estimates ``made`` at the
+        samples ``last`` (:meth:`_last_before`), stays ``LEAP_MARGIN_M`` inside R."""
+        xy = []
+        for est, i, origin in zip(made, last, (self.bound.left_origin_m, self.bound.right_origin_m), strict=True):
+            assert est is not None
+            xy.append(est.pos_n_m[i, :2] + np.asarray(origin[:2]))
         d = np.hypot(xy[0][:, 0] - xy[1][:, 0], xy[0][:, 1] - xy[1][:, 1])
         return bool(np.all(d < self.bound.max_m - LEAP_MARGIN_M))
+
+    def _heading_idle(self, made: list[NavBatch | None], last: list[np.ndarray]) -> bool:
+        """Follow the relative heading through each leaped cell's estimates, as cell by cell; False as
+        soon as it would correct a heading (the leap is then undone)."""
+        if self.heading is None:
+            return True
+        start = [0, 0]
+        left, right = self._feet[0].nav, self._feet[1].nav
+        for j in range(last[0].shape[0]):
+            steps: list[_Step | None] = []
+            for foot, (est, i) in enumerate(zip(made, last, strict=True)):
+                assert est is not None
+                a, b = start[foot], int(i[j]) + 1
+                steps.append(_Step(est.t_s[a:b], est.stance[a:b], est.quat_nb_wxyz[a:b]) if b > a else None)
+                start[foot] = max(a, b)
+            if not self.heading.after_batch(left, steps[0], right, steps[1], dry=True):
+                return False
+        return True
 
     @staticmethod
     def _finish_lead_in(f: _Foot) -> None:
