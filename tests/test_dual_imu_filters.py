@@ -31,11 +31,16 @@ depends on the drawn gyro biases), so a figure is judged on the seed average, as
 LEVER = np.asarray(DEFAULT_LEVER_B_M)
 
 
+def _table(setup: BoardSetup) -> dict[tuple[str, str], TableRow]:
+    """The experiment's table on ``SEEDS`` (printed), by course and method."""
+    rows = error_table(SEEDS, setup=setup)
+    print("\n" + format_table(rows, SEEDS, setup))
+    return {(r.course, r.method): r for r in rows}
+
+
 @pytest.fixture(scope="module")
 def table() -> dict[tuple[str, str], TableRow]:
-    rows = error_table(SEEDS)
-    print("\n" + format_table(rows, SEEDS))
-    return {(r.course, r.method): r for r in rows}
+    return _table(BoardSetup())
 
 
 @pytest.mark.parametrize("course", COURSES)
@@ -68,10 +73,7 @@ def test_the_board_beats_an_imu_on_each_foot(table: dict[tuple[str, str], TableR
 
 @pytest.fixture(scope="module")
 def table_axis_errors() -> dict[tuple[str, str], TableRow]:
-    setup = BoardSetup(axes="gyro-bias-calibrated")
-    rows = error_table(SEEDS, setup=setup)
-    print("\n" + format_table(rows, SEEDS, setup))
-    return {(r.course, r.method): r for r in rows}
+    return _table(BoardSetup(axes="gyro-bias-calibrated"))
 
 
 @pytest.mark.parametrize("course", COURSES)
@@ -88,9 +90,7 @@ def test_with_gyro_axis_errors_the_second_imu_cuts_the_error_by_a_fifth_or_more(
 
 @pytest.fixture(scope="module")
 def table_paper_setup() -> dict[tuple[str, str], TableRow]:
-    rows = error_table(SEEDS, setup=PAPER_SETUP)
-    print("\n" + format_table(rows, SEEDS, PAPER_SETUP))
-    return {(r.course, r.method): r for r in rows}
+    return _table(PAPER_SETUP)
 
 
 @pytest.mark.parametrize("course", COURSES)

@@ -206,7 +206,8 @@ class FeetLockstep:
     released_cells
         cells navigated without the bound because a foot's data lagged by more than ``max_lead_s``.
     leaped_cells, undone_leaps
-        cells navigated in leaps (module docstring), and leaps undone because the feet came near R.
+        cells navigated in leaps (module docstring), and leaps undone (the feet came near R, or a
+        heading would have been corrected).
     heading : HeadingCoupler or None
         the relative heading's record (its ``times_s``), with ``bound.heading``.
     """
