@@ -179,6 +179,11 @@ def _statistic_kernel(
     a result depends on its window's samples only (never on where a stream was cut into batches).
     """
     tmp = np.empty(3 * window)
+    # |ω_j|² terms in window order are the squares of gyr's values in memory order: computed once
+    gyr_sq = np.empty(3 * acc.shape[0] if kind in (0, 3) else 0)
+    for j in range(gyr_sq.shape[0] // 3):
+        for c in range(3):
+            gyr_sq[3 * j + c] = gyr[j, c] * gyr[j, c]
     for i in range(out.shape[0]):
         e = first + i
         s = max(0, e - window + 1)
@@ -210,10 +215,7 @@ def _statistic_kernel(
                 tmp[j] = dn * dn
             acc_term = _pairwise_sum(tmp, _ZERO, w)
         if kind in (0, 3):  # shoe, are: Σ|ω_j|²
-            for j in range(w):
-                for c in range(3):
-                    tmp[3 * j + c] = gyr[s + j, c] * gyr[s + j, c]
-            gyr_term = _pairwise_sum(tmp, _ZERO, 3 * w)
+            gyr_term = _pairwise_sum(gyr_sq, 3 * s, 3 * w)
         stat = (acc_term / sa2 + gyr_term / sg2) / w
         out[i] = stat if math.isfinite(stat) else math.inf
 
