@@ -329,6 +329,8 @@ def _adaptive_threshold_kernel(
     log_threshold: float,
     rule: F64,
     out_log_th: F64,
+    blocks: F64,
+    block_n: NDArray[np.int64],
 ) -> float:  # pragma: no cover - compiled
     """The adaptive rule of the module docstring over one batch; returns the log10 threshold.
 
@@ -338,11 +340,17 @@ def _adaptive_threshold_kernel(
     point moves on by removing the samples that left the history and merging those that entered it
     (a copy of the history instead of a sort). ``rule`` is
     [percentile_lo, percentile_hi, motion_decades, margin_decades, log_min, log_max].
+
+    When ``update_every`` divides ``history_len``, the samples that leave the history at an update
+    point are those that entered it ``history_len`` samples before: ``blocks`` (shaped as ``ring``)
+    keeps each entering block's sorted finite values at the block's ring position, and
+    ``block_n`` (ring length // update_every,) their number, so each is sorted once.
     """
     cap = ring.shape[0]
     q_lo, q_hi = rule[0] / 100.0, rule[1] / 100.0
     motion, margin, log_min, log_max = rule[2], rule[3], rule[4], rule[5]
     cur, n_sorted = state[0], state[1]
+    reuse = history_len % update_every == 0
     for i in range(log_stat.shape[0]):
         k = seen + i
         if k > 0 and k % update_every == 0:
@@ -350,15 +358,19 @@ def _adaptive_threshold_kernel(
             lo1, hi1 = max(0, k - update_every - history_len), k - update_every
             lo2 = max(0, k - history_len)
             n_rem = max(0, min(hi1, lo2) - lo1)
-            rem = np.empty(n_rem)
-            m = 0
-            for a in range(lo1, lo1 + n_rem):
-                val = ring[a % cap]
-                if math.isfinite(val):
-                    rem[m] = val
-                    m += 1
-            rem = rem[:m]
-            _sort_in_place(rem)
+            if reuse and n_rem == update_every:  # the block that entered at update point lo1 + update_every
+                b0 = lo1 % cap
+                rem = blocks[b0 : b0 + block_n[b0 // update_every]]
+            else:
+                rem = np.empty(n_rem)
+                m = 0
+                for a in range(lo1, lo1 + n_rem):
+                    val = ring[a % cap]
+                    if math.isfinite(val):
+                        rem[m] = val
+                        m += 1
+                rem = rem[:m]
+                _sort_in_place(rem)
             lo_add = max(lo2, hi1)
             add = np.empty(k - lo_add)
             m = 0
@@ -369,6 +381,10 @@ def _adaptive_threshold_kernel(
                     m += 1
             add = add[:m]
             _sort_in_place(add)
+            if reuse and k - lo_add == update_every:
+                b0 = lo_add % cap
+                blocks[b0 : b0 + m] = add
+                block_n[b0 // update_every] = m
             n_sorted = _merge_sorted(sorted_bufs[cur], n_sorted, rem, add, sorted_bufs[1 - cur])
             cur = 1 - cur
             if k - lo2 >= update_every and n_sorted > 0:
@@ -403,6 +419,8 @@ class StreamingDetector:
         self._ring = np.full(self._history_len + self._update_every, math.nan)
         self._sorted = np.empty((2, self._history_len + self._update_every))
         self._sorted_state = np.zeros(2, dtype=np.int64)  # which of the pair is current, its length
+        self._blocks = np.empty(self._history_len + self._update_every)  # sorted blocks, for their removal
+        self._block_n = np.zeros((self._history_len + self._update_every) // self._update_every, dtype=np.int64)
         self._rule = np.array(
             [
                 5.0,
@@ -441,6 +459,8 @@ class StreamingDetector:
                 self._log_threshold,
                 self._rule,
                 log_th,
+                self._blocks,
+                self._block_n,
             )
         self._seen += n
         threshold: F64 = 10.0**log_th
