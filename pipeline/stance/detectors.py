@@ -496,8 +496,12 @@ class StreamingDetector:
     def _statistic(self, acc_b_mps2: F64, gyr_b_radps: F64) -> F64:
         n = acc_b_mps2.shape[0]
         seen = self._tail_acc.shape[0]
-        acc = np.concatenate([self._tail_acc, np.asarray(acc_b_mps2, dtype=np.float64)])
-        gyr = np.concatenate([self._tail_gyr, np.asarray(gyr_b_radps, dtype=np.float64)])
+        if seen:
+            acc = np.concatenate([self._tail_acc, np.asarray(acc_b_mps2, dtype=np.float64)])
+            gyr = np.concatenate([self._tail_gyr, np.asarray(gyr_b_radps, dtype=np.float64)])
+        else:  # the first batch of a stream: its own samples, without a copy
+            acc = np.ascontiguousarray(acc_b_mps2, dtype=np.float64)
+            gyr = np.ascontiguousarray(gyr_b_radps, dtype=np.float64)
         stat = np.empty(n)
         p = self.params
         _statistic_kernel(
