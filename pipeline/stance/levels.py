@@ -89,17 +89,29 @@ def stance_update_points(still: NDArray[np.bool_], carried: int, after: int) -> 
     n = still.shape[0]
     if n == 0:
         return [], carried
-    idx = np.arange(n)
-    last_swing = np.maximum.accumulate(np.where(still, -1, idx))
-    run = np.where(last_swing < 0, idx + 1 + carried, idx - last_swing)
-    run[~still] = 0
-    ends = np.zeros(n, dtype=np.bool_)
-    ends[:-1] = still[:-1] & ~still[1:]
-    due = still & ((run == after) | (ends & (run < after)))
-    points = (np.flatnonzero(due) + 1).tolist()
+    starts, ends = stance_runs(still)
+    # each run's length before its first sample: the carried stance for a run at the batch's start
+    before = np.zeros(starts.shape[0], dtype=np.int64)
+    if still[0]:
+        before[0] = carried
+    # the sample where a run reaches ``after`` samples; else its last one if it ends in the batch short of that
+    reach = starts + (after - 1 - before)
+    full = (reach >= starts) & (reach < ends)
+    short = (ends < n) & (ends - starts + before < after)
+    points = (np.where(full, reach, ends - 1)[full | short] + 1).tolist()
     if not still[0] and 0 < carried < after:
         points.insert(0, 0)
-    return points, int(run[-1])
+    last = int(ends[-1] - starts[-1] + before[-1]) if still[-1] else 0
+    return points, last
+
+
+def stance_runs(still: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The runs of True in ``still`` (n,): their first indices and the indices after their last ones,
+    (k,) each, in order."""
+    edges = np.flatnonzero(still[1:] != still[:-1]) + 1
+    bounds = np.concatenate([[0], edges, [still.shape[0]]])
+    first = 0 if still[0] else 1  # runs alternate with the runs of False
+    return bounds[first:-1:2].astype(np.int64), bounds[first + 1 :: 2].astype(np.int64)
 
 
 @dataclass(frozen=True, slots=True)
