@@ -463,7 +463,11 @@ class StreamingDetector:
                 self._block_n,
             )
         self._seen += n
-        threshold: F64 = 10.0**log_th
+        # γ changes only at update points: 10^x once per run of equal values, the same 10^x per element
+        change = np.ones(n, dtype=np.bool_)
+        np.not_equal(log_th[1:], log_th[:-1], out=change[1:])
+        starts = np.flatnonzero(change)
+        threshold: F64 = np.repeat(10.0 ** log_th[starts], np.diff(np.append(starts, n)))
         near = log_stat < log_th + self.params.stance_hysteresis_decades
         return stat, threshold, self._debounce(log_stat < log_th, near)
 
