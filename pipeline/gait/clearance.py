@@ -96,8 +96,7 @@ class StrideClearanceTracker:
     def _finish(self, t_end: float, out_t: list[float], out_min: list[float], out_max: list[float]) -> None:
         t = self._t[0] if len(self._t) == 1 else np.concatenate(self._t)
         c = self._c[0] if len(self._c) == 1 else np.concatenate(self._c)
-        ends = (float(t[0]), float(t[-1]), float(c[0]), float(c[-1])) if t.size else (math.nan,)
-        if all(map(math.isfinite, ends)) and not ends[1] - ends[0] >= MIN_SWING_S:
+        if t.size and all(map(math.isfinite, (t[0], t[-1], c[0], c[-1]))) and not t[-1] - t[0] >= MIN_SWING_S:
             return  # too short, told by its first and last samples (kept by the filter below)
         finite = np.isfinite(t) & np.isfinite(c)  # bad samples (flagged upstream) say nothing here
         if not finite.all():
