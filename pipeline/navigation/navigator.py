@@ -27,9 +27,9 @@ from footnav.pipeline.navigation.params import FilterParams
 from footnav.pipeline.navigation.profiles import G0_MPS2, UnitProfile, get_profile
 from footnav.pipeline.navigation.warm import build_kernels
 from footnav.pipeline.samples import ImuBatch
-from footnav.pipeline.stance.detectors import DetectorParams, StreamingDetector
+from footnav.pipeline.stance.detectors import DetectorParams, StreamingDetector, true_runs
 from footnav.pipeline.stance.height_detector import HeightStanceDetector
-from footnav.pipeline.stance.levels import StanceLevelParams, StanceLevels, stance_runs
+from footnav.pipeline.stance.levels import StanceLevelParams, StanceLevels
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]
@@ -477,7 +477,7 @@ class Navigator:
         assert self._x is not None
         n = still.shape[0]
         floor = np.empty(n)
-        stance_starts = stance_runs(still)[0] if n else np.empty(0, dtype=np.int64)  # for each stance's floor below
+        stance_starts = true_runs(still)[0] if n else np.empty(0, dtype=np.int64)  # for each stance's floor below
         a = 0
         for b in [*self.levels.update_points(still), None]:  # None: the rest of the batch, with no update after it
             end = n if b is None else b

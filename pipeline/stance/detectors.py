@@ -161,7 +161,7 @@ def _pairwise_sum(a: F64, lo: int, n: int) -> float:  # pragma: no cover - compi
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _sum_terms(a: F64, lo: int, n: int) -> float:  # pragma: no cover - compiled
+def _sum_terms(a: F64, lo: int | np.int64, n: int) -> float:  # pragma: no cover - compiled
     """:func:`_pairwise_sum` of a window's terms, whose ≤ 128 terms (every window of the default
     W) are one block of numpy's pairwise sum: :func:`_pairwise_block` called directly, one call
     fewer per window."""
@@ -495,14 +495,21 @@ class StreamingDetector:
         the debounce.
         """
         n = near.shape[0]
-        idx = np.arange(n)
-        # length of the run of near samples ending at each sample, continuing the previous batch's run
-        last_false = np.maximum.accumulate(np.where(near, -1, idx))
-        run = np.where(last_false < 0, idx + 1 + self._run, idx - last_false)
-        run[~near] = 0
-        if n:
-            self._run = int(run[-1])
-        still: NDArray[np.bool_] = below & (run >= self._min_run)
+        if n == 0:
+            return below.copy()
+        # each run of near samples, continuing the previous batch's run when it starts the batch
+        starts, ends = true_runs(near)
+        before = np.zeros(starts.shape[0], dtype=np.int64)
+        if near[0]:
+            before[0] = self._run
+        # a run's samples from its min_run-th on (counting the samples before the batch)
+        first = np.maximum(starts, starts + (self._min_run - 1) - before)
+        keep = first < ends
+        edges = np.zeros(n + 1, dtype=np.int8)
+        edges[first[keep]] = 1
+        edges[ends[keep]] = -1  # runs are apart: no index is both
+        self._run = int(ends[-1] - starts[-1] + before[-1]) if near[-1] else 0
+        still: NDArray[np.bool_] = below & (np.cumsum(edges[:n], dtype=np.int8) > 0)
         return still
 
     def _statistic(self, acc_b_mps2: F64, gyr_b_radps: F64) -> F64:
@@ -531,3 +538,12 @@ class StreamingDetector:
         self._tail_acc = acc[-keep:].copy()
         self._tail_gyr = gyr[-keep:].copy()
         return stat
+
+
+def true_runs(flags: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The runs of True in ``flags`` (n,), n ≥ 1: their first indices and the indices after their last ones,
+    (k,) each, in order (stances, near-threshold runs)."""
+    edges = np.flatnonzero(flags[1:] != flags[:-1]) + 1
+    bounds = np.concatenate([[0], edges, [flags.shape[0]]])
+    first = 0 if flags[0] else 1  # runs alternate with the runs of False
+    return bounds[first:-1:2].astype(np.int64), bounds[first + 1 :: 2].astype(np.int64)

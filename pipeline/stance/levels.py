@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from footnav.pipeline.navigation.eskf import N_STATE, P0, clone_height, update1
+from footnav.pipeline.stance.detectors import true_runs
 from numba import njit
 from numpy.typing import NDArray
 
@@ -89,7 +90,7 @@ def stance_update_points(still: NDArray[np.bool_], carried: int, after: int) -> 
     n = still.shape[0]
     if n == 0:
         return [], carried
-    starts, ends = stance_runs(still)
+    starts, ends = true_runs(still)
     # each run's length before its first sample: the carried stance for a run at the batch's start
     before = np.zeros(starts.shape[0], dtype=np.int64)
     if still[0]:
@@ -103,15 +104,6 @@ def stance_update_points(still: NDArray[np.bool_], carried: int, after: int) -> 
         points.insert(0, 0)
     last = int(ends[-1] - starts[-1] + before[-1]) if still[-1] else 0
     return points, last
-
-
-def stance_runs(still: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """The runs of True in ``still`` (n,): their first indices and the indices after their last ones,
-    (k,) each, in order."""
-    edges = np.flatnonzero(still[1:] != still[:-1]) + 1
-    bounds = np.concatenate([[0], edges, [still.shape[0]]])
-    first = 0 if still[0] else 1  # runs alternate with the runs of False
-    return bounds[first:-1:2].astype(np.int64), bounds[first + 1 :: 2].astype(np.int64)
 
 
 @dataclass(frozen=True, slots=True)
