@@ -391,7 +391,8 @@ def _adaptive_threshold_kernel(
             _sort_in_place(add)
             if reuse and k - lo_add == update_every:
                 b0 = lo_add % cap
-                blocks[b0 : b0 + m] = add
+                for j in range(m):  # a loop: numba compiles a slice assignment slowly
+                    blocks[b0 + j] = add[j]
                 block_n[b0 // update_every] = m
             n_sorted = _merge_sorted(sorted_bufs[cur], n_sorted, rem, add, sorted_bufs[1 - cur])
             cur = 1 - cur
