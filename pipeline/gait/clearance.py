@@ -12,6 +12,7 @@ clearance over the middle half of the swing (25-75 % of its duration): the minim
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -93,16 +94,20 @@ class StrideClearanceTracker:
         return StrideClearance(np.asarray(out_t), np.asarray(out_min), np.asarray(out_max))
 
     def _finish(self, t_end: float, out_t: list[float], out_min: list[float], out_max: list[float]) -> None:
-        t = np.concatenate(self._t)
-        c = np.concatenate(self._c)
+        t = self._t[0] if len(self._t) == 1 else np.concatenate(self._t)
+        c = self._c[0] if len(self._c) == 1 else np.concatenate(self._c)
+        if t.size and all(map(math.isfinite, (t[0], t[-1], c[0], c[-1]))) and not t[-1] - t[0] >= MIN_SWING_S:
+            return  # too short, told by its first and last samples (kept by the filter below)
         finite = np.isfinite(t) & np.isfinite(c)  # bad samples (flagged upstream) say nothing here
-        t, c = t[finite], c[finite]
+        if not finite.all():
+            t, c = t[finite], c[finite]
         if t.size == 0 or not t[-1] - t[0] >= MIN_SWING_S:
             return
         lo, hi = t[0] + 0.25 * (t[-1] - t[0]), t[0] + 0.75 * (t[-1] - t[0])
         mid = (t >= lo) & (t <= hi)
-        if not mid.any():
+        c_mid = c[mid]
+        if c_mid.size == 0:
             return
         out_t.append(t_end)
-        out_min.append(float(np.min(c[mid])))
+        out_min.append(float(np.min(c_mid)))
         out_max.append(float(np.max(c)))

@@ -27,7 +27,7 @@ from footnav.pipeline.navigation.params import FilterParams
 from footnav.pipeline.navigation.profiles import G0_MPS2, UnitProfile, get_profile
 from footnav.pipeline.navigation.warm import build_kernels
 from footnav.pipeline.samples import ImuBatch
-from footnav.pipeline.stance.detectors import DetectorParams, StreamingDetector
+from footnav.pipeline.stance.detectors import DetectorParams, StreamingDetector, true_runs
 from footnav.pipeline.stance.height_detector import HeightStanceDetector
 from footnav.pipeline.stance.levels import StanceLevelParams, StanceLevels
 from numpy.typing import NDArray
@@ -477,8 +477,7 @@ class Navigator:
         assert self._x is not None
         n = still.shape[0]
         floor = np.empty(n)
-        # the last swing sample at or before each sample (−1: none in the batch), for each stance's floor below
-        last_swing = np.maximum.accumulate(np.where(still, -1, np.arange(n)))
+        stance_starts = true_runs(still)[0] if n else np.empty(0, dtype=np.int64)  # for each stance's floor below
         a = 0
         for b in [*self.levels.update_points(still), None]:  # None: the rest of the batch, with no update after it
             end = n if b is None else b
@@ -493,8 +492,9 @@ class Navigator:
                 self._x, self._P, z_level = self.levels.stance_update(self._x, self._P)
                 if self.level_updates is not None and math.isfinite(z_level):
                     self.level_updates.append((self.stats.samples_out + b - 1, z_level))
-                if b > 0:  # this stance's samples in the batch are on its level
-                    floor[int(last_swing[b - 1]) + 1 : b] = self.levels.floor_z_m
+                if b > 0 and still[b - 1]:  # this stance's samples in the batch are on its level
+                    first = int(stance_starts[np.searchsorted(stance_starts, b - 1, side="right") - 1])
+                    floor[first:b] = self.levels.floor_z_m
             a = end
         return floor
 

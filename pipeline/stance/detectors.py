@@ -160,6 +160,14 @@ def _pairwise_sum(a: F64, lo: int, n: int) -> float:  # pragma: no cover - compi
     return vals[0]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _sum_terms(a: F64, lo: int | np.int64, n: int) -> float:  # pragma: no cover - compiled
+    """:func:`_pairwise_sum` of a window's terms, whose ≤ 128 terms (every window of the default
+    W) are one block of numpy's pairwise sum: :func:`_pairwise_block` called directly, one call
+    fewer per window."""
+    return _pairwise_block(a, lo, n) if n <= 128 else _pairwise_sum(a, lo, n)
+
+
 @njit(cache=True, nogil=True)
 def _statistic_kernel(
     acc: F64,
@@ -179,6 +187,11 @@ def _statistic_kernel(
     a result depends on its window's samples only (never on where a stream was cut into batches).
     """
     tmp = np.empty(3 * window)
+    # |ω_j|² terms in window order are the squares of gyr's values in memory order: computed once
+    gyr_sq = np.empty(3 * acc.shape[0] if kind in (0, 3) else 0)
+    for j in range(gyr_sq.shape[0] // 3):
+        for c in range(3):
+            gyr_sq[3 * j + c] = gyr[j, c] * gyr[j, c]
     for i in range(out.shape[0]):
         e = first + i
         s = max(0, e - window + 1)
@@ -199,7 +212,7 @@ def _statistic_kernel(
                 tmp[3 * j] = d0 * d0
                 tmp[3 * j + 1] = d1 * d1
                 tmp[3 * j + 2] = d2 * d2
-            acc_term = _pairwise_sum(tmp, _ZERO, 3 * w)
+            acc_term = _sum_terms(tmp, _ZERO, 3 * w)
             if kind == 0:
                 dn = math.sqrt(0.0 + m0 * m0 + m1 * m1 + m2 * m2) - g
                 acc_term = acc_term + w * (dn * dn)
@@ -208,12 +221,9 @@ def _statistic_kernel(
                 a0, a1, a2 = acc[s + j, 0], acc[s + j, 1], acc[s + j, 2]
                 dn = math.sqrt(0.0 + a0 * a0 + a1 * a1 + a2 * a2) - g
                 tmp[j] = dn * dn
-            acc_term = _pairwise_sum(tmp, _ZERO, w)
+            acc_term = _sum_terms(tmp, _ZERO, w)
         if kind in (0, 3):  # shoe, are: Σ|ω_j|²
-            for j in range(w):
-                for c in range(3):
-                    tmp[3 * j + c] = gyr[s + j, c] * gyr[s + j, c]
-            gyr_term = _pairwise_sum(tmp, _ZERO, 3 * w)
+            gyr_term = _sum_terms(gyr_sq, 3 * s, 3 * w)
         stat = (acc_term / sa2 + gyr_term / sg2) / w
         out[i] = stat if math.isfinite(stat) else math.inf
 
@@ -327,6 +337,8 @@ def _adaptive_threshold_kernel(
     log_threshold: float,
     rule: F64,
     out_log_th: F64,
+    blocks: F64,
+    block_n: NDArray[np.int64],
 ) -> float:  # pragma: no cover - compiled
     """The adaptive rule of the module docstring over one batch; returns the log10 threshold.
 
@@ -336,11 +348,17 @@ def _adaptive_threshold_kernel(
     point moves on by removing the samples that left the history and merging those that entered it
     (a copy of the history instead of a sort). ``rule`` is
     [percentile_lo, percentile_hi, motion_decades, margin_decades, log_min, log_max].
+
+    When ``update_every`` divides ``history_len``, the samples that leave the history at an update
+    point are those that entered it ``history_len`` samples before: ``blocks`` (shaped as ``ring``)
+    keeps each entering block's sorted finite values at the block's ring position, and
+    ``block_n`` (ring length // update_every,) their number, so each is sorted once.
     """
     cap = ring.shape[0]
     q_lo, q_hi = rule[0] / 100.0, rule[1] / 100.0
     motion, margin, log_min, log_max = rule[2], rule[3], rule[4], rule[5]
     cur, n_sorted = state[0], state[1]
+    reuse = history_len % update_every == 0
     for i in range(log_stat.shape[0]):
         k = seen + i
         if k > 0 and k % update_every == 0:
@@ -348,15 +366,19 @@ def _adaptive_threshold_kernel(
             lo1, hi1 = max(0, k - update_every - history_len), k - update_every
             lo2 = max(0, k - history_len)
             n_rem = max(0, min(hi1, lo2) - lo1)
-            rem = np.empty(n_rem)
-            m = 0
-            for a in range(lo1, lo1 + n_rem):
-                val = ring[a % cap]
-                if math.isfinite(val):
-                    rem[m] = val
-                    m += 1
-            rem = rem[:m]
-            _sort_in_place(rem)
+            if reuse and n_rem == update_every:  # the block that entered at update point lo1 + update_every
+                b0 = lo1 % cap
+                rem = blocks[b0 : b0 + block_n[b0 // update_every]]
+            else:
+                rem = np.empty(n_rem)
+                m = 0
+                for a in range(lo1, lo1 + n_rem):
+                    val = ring[a % cap]
+                    if math.isfinite(val):
+                        rem[m] = val
+                        m += 1
+                rem = rem[:m]
+                _sort_in_place(rem)
             lo_add = max(lo2, hi1)
             add = np.empty(k - lo_add)
             m = 0
@@ -367,6 +389,11 @@ def _adaptive_threshold_kernel(
                     m += 1
             add = add[:m]
             _sort_in_place(add)
+            if reuse and k - lo_add == update_every:
+                b0 = lo_add % cap
+                for j in range(m):  # a loop: numba compiles a slice assignment slowly
+                    blocks[b0 + j] = add[j]
+                block_n[b0 // update_every] = m
             n_sorted = _merge_sorted(sorted_bufs[cur], n_sorted, rem, add, sorted_bufs[1 - cur])
             cur = 1 - cur
             if k - lo2 >= update_every and n_sorted > 0:
@@ -401,6 +428,8 @@ class StreamingDetector:
         self._ring = np.full(self._history_len + self._update_every, math.nan)
         self._sorted = np.empty((2, self._history_len + self._update_every))
         self._sorted_state = np.zeros(2, dtype=np.int64)  # which of the pair is current, its length
+        self._blocks = np.empty(self._history_len + self._update_every)  # sorted blocks, for their removal
+        self._block_n = np.zeros((self._history_len + self._update_every) // self._update_every, dtype=np.int64)
         self._rule = np.array(
             [
                 5.0,
@@ -439,9 +468,15 @@ class StreamingDetector:
                 self._log_threshold,
                 self._rule,
                 log_th,
+                self._blocks,
+                self._block_n,
             )
         self._seen += n
-        threshold: F64 = 10.0**log_th
+        # γ changes only at update points: 10^x once per run of equal values, the same 10^x per element
+        change = np.ones(n, dtype=np.bool_)
+        np.not_equal(log_th[1:], log_th[:-1], out=change[1:])
+        starts = np.flatnonzero(change)
+        threshold: F64 = np.repeat(10.0 ** log_th[starts], np.diff(np.append(starts, n)))
         near = log_stat < log_th + self.params.stance_hysteresis_decades
         return stat, threshold, self._debounce(log_stat < log_th, near)
 
@@ -461,21 +496,32 @@ class StreamingDetector:
         the debounce.
         """
         n = near.shape[0]
-        idx = np.arange(n)
-        # length of the run of near samples ending at each sample, continuing the previous batch's run
-        last_false = np.maximum.accumulate(np.where(near, -1, idx))
-        run = np.where(last_false < 0, idx + 1 + self._run, idx - last_false)
-        run[~near] = 0
-        if n:
-            self._run = int(run[-1])
-        still: NDArray[np.bool_] = below & (run >= self._min_run)
+        if n == 0:
+            return below.copy()
+        # each run of near samples, continuing the previous batch's run when it starts the batch
+        starts, ends = true_runs(near)
+        before = np.zeros(starts.shape[0], dtype=np.int64)
+        if near[0]:
+            before[0] = self._run
+        # a run's samples from its min_run-th on (counting the samples before the batch)
+        first = np.maximum(starts, starts + (self._min_run - 1) - before)
+        keep = first < ends
+        edges = np.zeros(n + 1, dtype=np.int8)
+        edges[first[keep]] = 1
+        edges[ends[keep]] = -1  # runs are apart: no index is both
+        self._run = int(ends[-1] - starts[-1] + before[-1]) if near[-1] else 0
+        still: NDArray[np.bool_] = below & (np.cumsum(edges[:n], dtype=np.int8) > 0)
         return still
 
     def _statistic(self, acc_b_mps2: F64, gyr_b_radps: F64) -> F64:
         n = acc_b_mps2.shape[0]
         seen = self._tail_acc.shape[0]
-        acc = np.concatenate([self._tail_acc, np.asarray(acc_b_mps2, dtype=np.float64)])
-        gyr = np.concatenate([self._tail_gyr, np.asarray(gyr_b_radps, dtype=np.float64)])
+        if seen:
+            acc = np.concatenate([self._tail_acc, np.asarray(acc_b_mps2, dtype=np.float64)])
+            gyr = np.concatenate([self._tail_gyr, np.asarray(gyr_b_radps, dtype=np.float64)])
+        else:  # the first batch of a stream: its own samples, without a copy
+            acc = np.ascontiguousarray(acc_b_mps2, dtype=np.float64)
+            gyr = np.ascontiguousarray(gyr_b_radps, dtype=np.float64)
         stat = np.empty(n)
         p = self.params
         _statistic_kernel(
@@ -493,3 +539,12 @@ class StreamingDetector:
         self._tail_acc = acc[-keep:].copy()
         self._tail_gyr = gyr[-keep:].copy()
         return stat
+
+
+def true_runs(flags: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The runs of True in ``flags`` (n,), n ≥ 1: their first indices and the indices after their last ones,
+    (k,) each, in order (stances, near-threshold runs)."""
+    edges = np.flatnonzero(flags[1:] != flags[:-1]) + 1
+    bounds = np.concatenate([[0], edges, [flags.shape[0]]])
+    first = 0 if flags[0] else 1  # runs alternate with the runs of False
+    return bounds[first:-1:2].astype(np.int64), bounds[first + 1 :: 2].astype(np.int64)

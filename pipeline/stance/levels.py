@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from footnav.pipeline.navigation.eskf import N_STATE, P0, clone_height, update1
+from footnav.pipeline.stance.detectors import true_runs
 from numba import njit
 from numpy.typing import NDArray
 
@@ -89,17 +90,20 @@ def stance_update_points(still: NDArray[np.bool_], carried: int, after: int) -> 
     n = still.shape[0]
     if n == 0:
         return [], carried
-    idx = np.arange(n)
-    last_swing = np.maximum.accumulate(np.where(still, -1, idx))
-    run = np.where(last_swing < 0, idx + 1 + carried, idx - last_swing)
-    run[~still] = 0
-    ends = np.zeros(n, dtype=np.bool_)
-    ends[:-1] = still[:-1] & ~still[1:]
-    due = still & ((run == after) | (ends & (run < after)))
-    points = (np.flatnonzero(due) + 1).tolist()
+    starts, ends = true_runs(still)
+    # each run's length before its first sample: the carried stance for a run at the batch's start
+    before = np.zeros(starts.shape[0], dtype=np.int64)
+    if still[0]:
+        before[0] = carried
+    # the sample where a run reaches ``after`` samples; else its last one if it ends in the batch short of that
+    reach = starts + (after - 1 - before)
+    full = (reach >= starts) & (reach < ends)
+    short = (ends < n) & (ends - starts + before < after)
+    points = (np.where(full, reach, ends - 1)[full | short] + 1).tolist()
     if not still[0] and 0 < carried < after:
         points.insert(0, 0)
-    return points, int(run[-1])
+    last = int(ends[-1] - starts[-1] + before[-1]) if still[-1] else 0
+    return points, last
 
 
 @dataclass(frozen=True, slots=True)
