@@ -123,7 +123,7 @@ class BoardSetup:
 PAPER_SETUP: Final = BoardSetup(
     grade="icm20948-board", axes="icm20948-datasheet", rate_hz=100.0, full_scale=ICM20948_PAPER_RANGE
 )
-"""The paper's hardware (Chen et al. 2022, its section 4): ICM-20948s at 100 Hz, ±8 g, ±1000 °/s,
+"""The paper's hardware (Chen et al. 2022): ICM-20948s at 100 Hz, ±8 g, ±1000 °/s,
 uncalibrated but for the gyroscope's start-up bias (``imu_errors``: grade ``icm20948-board``, axis
 errors ``icm20948-datasheet``)."""
 
