@@ -159,7 +159,13 @@ def _add_feet_coupling_args(p: argparse.ArgumentParser, *, default: str) -> argp
         action="store_true",
         help="couple the feet by the inter-foot distance bound alone, not by their relative heading in stance too",
     )
+    _add_couple_heading_arg(feet)
     return feet
+
+
+def _add_couple_heading_arg(feet: argparse._ArgumentGroup) -> None:
+    # the relative heading is the default now; the flag that asked for it is still accepted
+    feet.add_argument("--couple-heading", action="store_true", help=argparse.SUPPRESS)
 
 
 def _add_lever_arm_arg(p: argparse.ArgumentParser) -> None:
@@ -532,6 +538,7 @@ def _add_evaluate_command(sub: Commands) -> None:
         help="couple the feet by the inter-foot distance bound alone (default: and by their relative heading in "
         "stance, when it is off by more than its band)",
     )
+    _add_couple_heading_arg(feet)
     _add_jobs_arg(evaluate)
 
 
