@@ -499,17 +499,13 @@ class StreamingDetector:
         if n == 0:
             return below.copy()
         # each run of near samples, continuing the previous batch's run when it starts the batch
-        starts, ends = true_runs(near)
-        before = np.zeros(starts.shape[0], dtype=np.int64)
-        if near[0]:
-            before[0] = self._run
+        starts, ends, before, self._run = carried_runs(near, self._run)
         # a run's samples from its min_run-th on (counting the samples before the batch)
         first = np.maximum(starts, starts + (self._min_run - 1) - before)
         keep = first < ends
         edges = np.zeros(n + 1, dtype=np.int8)
         edges[first[keep]] = 1
         edges[ends[keep]] = -1  # runs are apart: no index is both
-        self._run = int(ends[-1] - starts[-1] + before[-1]) if near[-1] else 0
         still: NDArray[np.bool_] = below & (np.cumsum(edges[:n], dtype=np.int8) > 0)
         return still
 
@@ -548,3 +544,18 @@ def true_runs(flags: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.i
     bounds = np.concatenate([[0], edges, [flags.shape[0]]])
     first = 0 if flags[0] else 1  # runs alternate with the runs of False
     return bounds[first:-1:2].astype(np.int64), bounds[first + 1 :: 2].astype(np.int64)
+
+
+def carried_runs(
+    flags: NDArray[np.bool_], carried: int
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], int]:
+    """:func:`true_runs` of a batch's ``flags`` (n,), n ≥ 1, continuing a run of ``carried`` samples
+    from the previous batch: the runs' first indices and ends (k,), the samples of each run before
+    its first one in the batch (k,: ``carried`` for a run that starts the batch, else 0), and the
+    length of the run in progress at the batch's end, to carry on (0: the batch ends in False)."""
+    starts, ends = true_runs(flags)
+    before = np.zeros(starts.shape[0], dtype=np.int64)
+    if flags[0]:
+        before[0] = carried
+    last = int(ends[-1] - starts[-1] + before[-1]) if flags[-1] else 0
+    return starts, ends, before, last

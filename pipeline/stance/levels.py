@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from footnav.pipeline.navigation.eskf import N_STATE, P0, clone_height, update1
-from footnav.pipeline.stance.detectors import true_runs
+from footnav.pipeline.stance.detectors import carried_runs
 from numba import njit
 from numpy.typing import NDArray
 
@@ -90,11 +90,7 @@ def stance_update_points(still: NDArray[np.bool_], carried: int, after: int) -> 
     n = still.shape[0]
     if n == 0:
         return [], carried
-    starts, ends = true_runs(still)
-    # each run's length before its first sample: the carried stance for a run at the batch's start
-    before = np.zeros(starts.shape[0], dtype=np.int64)
-    if still[0]:
-        before[0] = carried
+    starts, ends, before, last = carried_runs(still, carried)
     # the sample where a run reaches ``after`` samples; else its last one if it ends in the batch short of that
     reach = starts + (after - 1 - before)
     full = (reach >= starts) & (reach < ends)
@@ -102,7 +98,6 @@ def stance_update_points(still: NDArray[np.bool_], carried: int, after: int) -> 
     points = (np.where(full, reach, ends - 1)[full | short] + 1).tolist()
     if not still[0] and 0 < carried < after:
         points.insert(0, 0)
-    last = int(ends[-1] - starts[-1] + before[-1]) if still[-1] else 0
     return points, last
 
 
