@@ -137,13 +137,12 @@ def evaluate_pair(
         a file cannot be read or measured, or the two do not overlap in time.
     """
     from footnav.app.api.feet import navigate_pair
-    from footnav.pipeline.two_feet import FootSeparation
-    from footnav.pipeline.two_feet.heading import RelativeHeading
+    from footnav.pipeline.two_feet.live import coupling_bound
 
     recs = [_measurable(load_recording(p), p) for p in (left, right)]
     rows: list[Evaluation] = []
+    bound = coupling_bound("distance+heading" if heading else "distance")
     for coupled in (False,) if independent_only else (True, False):
-        bound = FootSeparation(heading=RelativeHeading() if heading else None)
         result = navigate_pair(recs[0], recs[1], coupled=coupled, bound=bound, stance_levels=stance_levels)
         how = "coupled" if coupled else "independent"
         feet = ((result.left, result.left_stats), (result.right, result.right_stats))
