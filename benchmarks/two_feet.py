@@ -18,7 +18,8 @@ error, independent and coupled (the first variant and R), and the change of the 
 %; then per axis errors, course (and all courses) and variant the mean over the walks, its change, the
 worst change of one walk, the noise (the SD over the seeds of the independent error: what changing the
 IMU's error draw alone does), how many walks got worse by more than 1 cm, and the runtime ratio coupled
-/ independent.
+/ independent. Beside the variants, the ceiling of any relative constraint: the independent feet's
+error vectors averaged sample by sample (``averaged_error``).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ import numpy as np
 from footnav.device.emulator.motion.gait import GaitTruth, two_feet_walks
 from footnav.device.emulator.sensors.imu_errors import IMU_GRADES, corrupt
 from footnav.pipeline.nav_types import NavBatch
-from footnav.pipeline.two_feet import FootSeparation, FootSignals, navigate_feet
+from footnav.pipeline.two_feet import FootSeparation, FootSignals, TwoFeetResult, navigate_feet
 from footnav.pipeline.two_feet.heading import RelativeHeading
 
 COURSES = ("rectangle", "figure8", "line", "stairs")
@@ -42,13 +43,31 @@ WORSE_M = 0.01
 """A walk counts as worse when its mean horizontal error grew by more than this, m."""
 
 
+def error_track(nav: NavBatch, truth: GaitTruth) -> tuple[np.ndarray, np.ndarray]:
+    """The sample numbers (n,) of one foot's estimates and their horizontal error vectors (n, 2), m."""
+    first = len(truth) - len(nav)
+    index = np.rint(truth.t_s[first:] * truth.rate_hz).astype(np.int64)
+    return index, nav.pos_n_m[:, :2] - truth.pos_n_m[first:, :2]
+
+
 def horizontal_errors(nav: NavBatch | None, truth: GaitTruth) -> tuple[float, float]:
     """(final, mean along the walk) horizontal error of one foot, m."""
     if nav is None:
         return float("nan"), float("nan")
-    first = len(truth) - len(nav)
-    e = np.hypot(*(nav.pos_n_m[:, :2] - truth.pos_n_m[first:, :2]).T)
+    e = np.hypot(*error_track(nav, truth)[1].T)
     return float(e[-1]), float(e.mean())
+
+
+def averaged_error(res: TwoFeetResult, left: GaitTruth, right: GaitTruth) -> float:
+    """The mean along the walk of the independent feet's horizontal error vectors averaged at each
+    common sample, m: what any coupling that knew exactly where each foot stands relative to the other
+    could reach when the feet's errors are independent and alike (their common part is unobservable to
+    it); the ceiling of a relative constraint."""
+    if res.left is None or res.right is None:
+        return float("nan")
+    (il, el), (ir, er) = error_track(res.left, left), error_track(res.right, right)
+    common, kl, kr = np.intersect1d(il, ir, assume_unique=True, return_indices=True)
+    return float(np.hypot(*(0.5 * (el[kl] + er[kr])).T).mean()) if common.size else float("nan")
 
 
 def walk_signals(
@@ -70,6 +89,8 @@ Row = tuple[float, float, float, float, float, int]
 
 
 VARIANTS = ("default", "distance", "heading", "distance+heading")
+CEILING = "ceiling (errors averaged)"
+"""The row of :func:`averaged_error`, printed beside the variants."""
 
 
 def couplings(variants: list[str], bounds: list[float], heading: RelativeHeading) -> dict[str, FootSeparation]:
@@ -98,6 +119,9 @@ def run(course: str, seed: int, duration_s: float, axes: str, variants: dict[str
         dt = time.perf_counter() - t0
         (fl, ml), (fr, mr) = horizontal_errors(res.left, left), horizontal_errors(res.right, right)
         out[name] = (fl, fr, ml, mr, dt, len(res.corrections) + len(res.heading_updates))
+        if coupling is None:
+            ceiling = averaged_error(res, left, right)
+            out[CEILING] = (math.nan, math.nan, ceiling, ceiling, dt, 0)
     return out
 
 
@@ -164,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
                 r = run(course, seed, args.duration, axes, variants)
                 fl, fr, ml, mr, ti, _ = r["ind"]
                 ind_mean = 0.5 * (ml + mr)
-                for name in variants:
+                for name in [*variants, CEILING]:
                     cfl, cfr, cml, cmr, tc, nc = r[name]
                     cpl_mean = 0.5 * (cml + cmr)
                     for group in (course, "all"):
