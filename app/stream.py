@@ -143,14 +143,9 @@ async def _arrivals(
                 await pending
 
 
-def _on_session_clock(batch: Any, result: SerialSessionResult, host_clock: Callable[[int], int] | None) -> Any:
+def _on_session_clock(batch: Any, result: SerialSessionResult) -> Any:
     """A batch of samples (IMU, raw IMU, INS states) with its time rebased to the session's first
-    sample (which the first batch sets), and its host stamps mapped by ``host_clock`` (per read: a
-    joined batch holds several); a stepwise batch, which has no device time, only mapped."""
-    if host_clock is not None:
-        stamps, read_of = np.unique(batch.host_ns, return_inverse=True)
-        mapped = np.array([host_clock(int(h)) for h in stamps], dtype=np.int64)
-        batch = dataclasses.replace(batch, host_ns=mapped[read_of])
+    sample (which the first batch sets); a stepwise batch, which has no device time, as it is."""
     if isinstance(batch, StepBatch):
         return batch
     if result.device_t0_s is None:
@@ -165,7 +160,6 @@ async def session_samples(
     expect_samples: int | None,
     source_done: Callable[[], bool],
     on_idle: Callable[[float], None],
-    host_clock: Callable[[int], int] | None = None,
     idle_notice_s: float | None = IDLE_NOTICE_S,
     window: tuple[float, float] | None = None,
     on_window: Callable[[], None] | None = None,
@@ -179,7 +173,6 @@ async def session_samples(
     the session's first sample; ends after ``expect_samples`` samples (packets of the other outputs)
     or when ``source_done()`` and the link has gone quiet.
 
-    ``host_clock`` maps the driver's host stamp of a batch to another (a replay's captured time).
     ``window = (start, end)`` in session seconds: the stream ends after ``end``; ``on_window()`` is
     called at the first sample after ``start`` (the samples before it are passed on too, to be
     navigated but not shown: ``footnav.app.session.run_unit_session``).
@@ -208,7 +201,7 @@ async def session_samples(
                     if item is not None:
                         yield item
                 continue
-            batch = _on_session_clock(batch, result, host_clock)
+            batch = _on_session_clock(batch, result)
             if isinstance(batch, StepBatch):
                 received += len(batch)
                 result.samples_received = received

@@ -15,10 +15,14 @@ packets, as the reads of a two-feet capture) and times, best of ``--repeats`` by
   replay`` run them;
 - **OpenShoeUnit, wire faults**: the same with the emulator's fault injector on the bytes (``--ber``
   bit errors, ``--drops`` lost packets): the reads with a gap or a bad packet take the general path;
+- **reads joined**: both again with the reads handed over as ``footnav replay --speed max`` does
+  (:meth:`footnav.device.links.replay.CaptureReplayLink.read_stamped`: many reads per call, framed and,
+  where clean, decoded in one pass);
 
 in packets per second, with the ratio to the baseline measured in the same run. It then checks that
 the unit delivered every packet of the clean stream once, in order, with the values and time stamps
-the struct loop decoded (float32 values widened to float64, ticks unwrapped).
+the struct loop decoded (float32 values widened to float64, ticks unwrapped), and the same samples
+with the reads joined.
 """
 
 from __future__ import annotations
@@ -70,6 +74,28 @@ class ChunkLink:
 
     async def close(self) -> None:
         self._chunks.clear()
+
+
+class StampedChunkLink(ChunkLink):
+    """:class:`ChunkLink` as a :class:`footnav.device.links.base.StampedByteLink`: the chunks as a replay at full
+    speed hands them over, up to ``JOIN_BYTES`` per call, each stamped with its number."""
+
+    def __init__(self, chunks: list[bytes]) -> None:
+        super().__init__(chunks)
+        self._stamp = 0
+
+    async def read_stamped(self) -> list[tuple[bytes, int]]:
+        from footnav.device.links.replay import JOIN_BYTES
+
+        if self._answers:
+            return [(self._answers.popleft(), self._stamp)]
+        out: list[tuple[bytes, int]] = []
+        size = 0
+        while self._chunks and size < JOIN_BYTES:
+            out.append((self._chunks.popleft(), self._stamp))
+            size += len(out[-1][0])
+            self._stamp += 1
+        return out
 
 
 @dataclass(frozen=True, slots=True)
@@ -138,13 +164,13 @@ def struct_loop(chunks: list[bytes]) -> Decoded:
     return Decoded(np.concatenate(counters), np.concatenate(times), np.concatenate(accs), np.concatenate(gyrs))
 
 
-async def _unit_stream(chunks: list[bytes], spent: list[float]) -> tuple[Decoded, object]:
+async def _unit_stream(chunks: list[bytes], spent: list[float], joined: bool) -> tuple[Decoded, object]:
     from footnav.device.modes import NormalImuMode
     from footnav.device.protocol.commands import CommandSet
     from footnav.device.unit import OpenShoeUnit
     from footnav.pipeline.samples import ImuBatch
 
-    unit = OpenShoeUnit(ChunkLink(chunks), command_set=CommandSet.V2015)
+    unit = OpenShoeUnit((StampedChunkLink if joined else ChunkLink)(chunks), command_set=CommandSet.V2015)
     await unit.start(NormalImuMode(0))
     batches: list[ImuBatch] = []
     c0 = time.process_time()
@@ -156,11 +182,11 @@ async def _unit_stream(chunks: list[bytes], spent: list[float]) -> tuple[Decoded
     return Decoded(b.counter, b.t_s, b.acc_b_mps2, b.gyr_b_radps), unit.stats
 
 
-def unit_decode(chunks: list[bytes]) -> tuple[Decoded, object, float]:
-    """What :class:`footnav.device.unit.OpenShoeUnit` delivers from ``chunks``, its link counts and the CPU
-    time of the stream (after the start command's ACK), s."""
+def unit_decode(chunks: list[bytes], joined: bool = False) -> tuple[Decoded, object, float]:
+    """What :class:`footnav.device.unit.OpenShoeUnit` delivers from ``chunks`` (``joined``: handed over as a
+    full-speed replay does), its link counts and the CPU time of the stream (after the start command's ACK), s."""
     spent: list[float] = []
-    decoded, stats = asyncio.run(_unit_stream(chunks, spent))
+    decoded, stats = asyncio.run(_unit_stream(chunks, spent, joined))
     return decoded, stats, spent[0]
 
 
@@ -205,17 +231,27 @@ def main(argv: list[str] | None = None) -> int:
     base = best_cpu(lambda: (struct_loop(chunks), None)[1], args.repeats)
     unit = best_cpu(lambda: unit_decode(chunks)[2], args.repeats)
     unit_bad = best_cpu(lambda: unit_decode(bad_chunks)[2], args.repeats)
-    print(f"{'row':<34}{'packets/s (CPU)':>18}{'µs per read':>14}{'vs baseline':>13}")
+    joined = best_cpu(lambda: unit_decode(chunks, joined=True)[2], args.repeats)
+    joined_bad = best_cpu(lambda: unit_decode(bad_chunks, joined=True)[2], args.repeats)
+    print(f"{'row':<44}{'packets/s (CPU)':>18}{'µs per read':>14}{'vs baseline':>13}")
     for name, cpu, reads in (
         ("struct loop (baseline)", base, len(chunks)),
         ("OpenShoeUnit", unit, len(chunks)),
         ("OpenShoeUnit, wire faults", unit_bad, len(bad_chunks)),
+        ("OpenShoeUnit, reads joined (full-speed replay)", joined, len(chunks)),
+        ("the same, wire faults", joined_bad, len(bad_chunks)),
     ):
-        print(f"{name:<34}{n / cpu:>18,.0f}{1e6 * cpu / reads:>14.1f}{base / cpu:>12.2f}×")
+        print(f"{name:<44}{n / cpu:>18,.0f}{1e6 * cpu / reads:>14.1f}{base / cpu:>12.2f}×")
 
     ref = struct_loop(chunks)
     got, stats, _ = unit_decode(chunks)
-    _, bad_stats, _ = unit_decode(bad_chunks)
+    bad, bad_stats, _ = unit_decode(bad_chunks)
+    fields = ("counter", "t_s", "acc", "gyr")
+    joins_alike = all(
+        np.array_equal(getattr(a, f), getattr(b, f))
+        for a, b in ((got, unit_decode(chunks, joined=True)[0]), (bad, unit_decode(bad_chunks, joined=True)[0]))
+        for f in fields
+    )
     same = (
         np.array_equal(got.counter, np.arange(1, n + 1))
         and np.array_equal(got.counter % (1 << 16), ref.counter)
@@ -227,7 +263,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(f"\nclean stream: {len(got.counter)} of {n} delivered, equal to the struct loop's: {same}; {stats}")
     print(f"faulty stream: {bad_stats}")
-    return 0 if same else 1
+    print(f"reads joined: the same samples as read by read, clean and faulty: {joins_alike}")
+    return 0 if same and joins_alike else 1
 
 
 if __name__ == "__main__":

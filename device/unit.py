@@ -34,7 +34,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import AsyncGenerator
+from collections.abc import AsyncGenerator, Awaitable, Callable
 from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Final, Self
@@ -47,7 +47,16 @@ from footnav.device.modes import InsMode, Mode, NormalImuMode, RawImuMode, Stepw
 from footnav.device.protocol import commands as p
 from footnav.device.protocol import extensions, ins_states, raw_imu, stepwise
 from footnav.device.protocol.extensions import BaroBatch, TofBatch
-from footnav.device.protocol.framer import DataPacket, DeviceAck, Frame, Framer, PacketRun
+from footnav.device.protocol.framer import (
+    DataPacket,
+    DeviceAck,
+    Frame,
+    Framer,
+    FramerStats,
+    PacketRun,
+    packet_ends,
+    split_by_read,
+)
 from footnav.device.protocol.imu import PAYLOAD_LEN, SharedTickClock, decode_imu_rows, decode_payloads
 from footnav.device.protocol.ins_states import InsLayout, InsStateBatch
 from footnav.device.protocol.integrity import ImuGuard, ins_plausible, step_plausible
@@ -120,6 +129,13 @@ class _Decoded:
 
 
 _COALESCE_BELOW_BYTES = 1024  # a read this small means the host has caught up with the unit
+_StampedRead = Callable[[], Awaitable[list[tuple[bytes, int]]]]
+"""A :class:`footnav.device.links.base.StampedByteLink`'s ``read_stamped``."""
+
+
+def _skipped(stats: FramerStats) -> tuple[int, int, int]:
+    """What a framer has rejected so far."""
+    return stats.bytes_skipped, stats.checksum_errors, stats.bad_lengths
 
 
 class OpenShoeUnit:
@@ -150,6 +166,8 @@ class OpenShoeUnit:
         read_interval_s: float = 0.0,
     ) -> None:
         self.link = link
+        self._read_stamped: _StampedRead | None = getattr(link, "read_stamped", None)
+        self._dirty_reads = False  # the last stamped reads held bytes in no frame
         self._read_interval_s = read_interval_s
         self._next_read = 0.0
         self._capture = capture
@@ -560,6 +578,8 @@ class OpenShoeUnit:
 
     async def _read_batches(self) -> list[Batch] | None:
         """Read once; ACK lossless packets; return the read's batches (None at end of stream)."""
+        if self._read_stamped is not None:
+            return await self._read_stamped_batches(self._read_stamped)
         if self._read_interval_s > 0:
             wait = self._next_read - time.monotonic()
             if wait > 0:
@@ -575,7 +595,49 @@ class OpenShoeUnit:
         self._bytes_received += len(data)
         if self._capture is not None:
             self._capture("rx", host_ns, data)
-        frames = self._framer.feed_runs(data)
+        return await self._read_frames(self._framer.feed_runs(data), host_ns)
+
+    async def _read_stamped_batches(self, read_stamped: _StampedRead) -> list[Batch] | None:
+        """:meth:`_read_batches` of a link that stamps its reads (:class:`StampedByteLink`): the reads it
+        returns framed in one pass and, when they are one run of normal-IMU packets in sequence, decoded in
+        one pass, each packet stamped by the read that completed it; else decoded read by read (framed
+        read by read too when a byte belonged to no frame). The batches are those of the reads one by one."""
+        reads = await read_stamped()
+        if not reads:
+            return None
+        data = reads[0][0] if len(reads) == 1 else b"".join(d for d, _ in reads)
+        self._bytes_received += len(data)
+        if self._capture is not None:
+            for d, h in reads:
+                self._capture("rx", h, d)
+        framer, out = self._framer, []
+        point = framer.checkpoint()
+        starts: list[int] = []
+        if not self._dirty_reads:
+            frames = framer.feed_runs(data, starts)
+            if _skipped(framer.stats) != _skipped(point[1]):
+                framer.rewind(point)
+                self._dirty_reads = True
+        if self._dirty_reads:
+            # a byte in no frame: framed read by read, where a false header can hold the frames after it
+            # back until the next read, as it did live (and so the next reads, until they are clean)
+            for d, h in reads:
+                out += await self._read_frames(framer.feed_runs(d), h)
+            self._dirty_reads = _skipped(framer.stats) != _skipped(point[1])
+            return out
+        read_ends = np.cumsum([len(d) for d, _ in reads])
+        stamps = np.array([h for _, h in reads], dtype=np.int64)
+        if len(frames) == 1 and type(frames[0]) is PacketRun:
+            host = stamps[np.searchsorted(read_ends, packet_ends(frames[0], starts[0]))]
+            fast = self._normal_run(frames[0], host)
+            if fast is not None:
+                return fast
+        for part, host_ns in zip(split_by_read(frames, starts, read_ends), stamps.tolist(), strict=True):
+            out += await self._read_frames(part, host_ns)
+        return out
+
+    async def _read_frames(self, frames: list[Frame | PacketRun], host_ns: int) -> list[Batch]:
+        """The batches of one read's ``frames``, read at ``host_ns``; ACKs lossless packets."""
         if len(frames) == 1 and type(frames[0]) is PacketRun:
             fast = self._normal_run(frames[0], host_ns)
             if fast is not None:
@@ -634,9 +696,10 @@ class OpenShoeUnit:
             [int.from_bytes(pl[:4], "big") if len(pl) == length else NO_TICK for pl in payloads], dtype=np.int64
         )
 
-    def _normal_run(self, run: PacketRun, host_ns: int) -> list[Batch] | None:
-        """A read that is one run of normal-IMU packets in sequence, decoded without a per-packet
-        step; None when the general path is needed (another mode, lossless ACKs, gaps, repeats)."""
+    def _normal_run(self, run: PacketRun, host_ns: int | NDArray[np.int64]) -> list[Batch] | None:
+        """A read that is one run of normal-IMU packets in sequence, read at ``host_ns`` (or per packet),
+        decoded without a per-packet step; None, with nothing changed, when the general path is needed
+        (another mode, lossless ACKs, gaps, repeats)."""
         if not (
             isinstance(self._mode, NormalImuMode)
             and run.payloads.shape[1] == PAYLOAD_LEN
@@ -653,21 +716,28 @@ class OpenShoeUnit:
         return self._imu_samples(counters, ticks, run.payloads, host_ns)
 
     def _imu_samples(
-        self, counters: NDArray[np.int64], ticks: NDArray[np.int64], payloads: NDArray[np.uint8], host_ns: int
+        self,
+        counters: NDArray[np.int64],
+        ticks: NDArray[np.int64],
+        payloads: NDArray[np.uint8],
+        host_ns: int | NDArray[np.int64],
     ) -> list[Batch]:
         """The normal-IMU payloads (m, 28) of the packets numbered ``counters`` (m,), time-stamped
-        ``ticks`` (m,), as one batch of their plausible samples read at ``host_ns`` ([] when none is)."""
+        ``ticks`` (m,), as one batch of their plausible samples read at ``host_ns`` (or (m,), per packet;
+        [] when none is plausible)."""
         imu = decode_imu_rows(payloads)
+        if isinstance(host_ns, int):
+            host = np.empty(len(counters), dtype=np.int64)
+            host.fill(host_ns)
+        else:
+            host = host_ns
         if not self._imu_guard.accepts_all(counters, imu, 3):
             ok = self._imu_guard.check_rows(counters, imu, 3)
             self._implausible += len(counters) - int(np.count_nonzero(ok))
-            ticks, imu, counters = ticks[ok], imu[ok], counters[ok]
+            ticks, imu, counters, host = ticks[ok], imu[ok], counters[ok], host[ok]
             if counters.size == 0:
                 return []
-        m = int(counters.size)
-        self._samples += m
-        host = np.empty(m, dtype=np.int64)
-        host.fill(host_ns)
+        self._samples += int(counters.size)
         return [ImuBatch(self._clock.update(ticks), imu[:, :3].copy(), imu[:, 3:].copy(), counters, host)]
 
     def _normal_only(self, frames: list[Frame | PacketRun]) -> bool:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import csv
 import math
 import os
@@ -16,8 +18,13 @@ import numpy as np
 import pytest
 from footnav.app.commands.demo import DemoOptions, run_demo
 from footnav.app.commands.export import run_export
+from footnav.app.commands.live import LiveOptions, live_session
 from footnav.app.commands.replay import FULL_SPEED_JOIN_SAMPLES, ReplayOptions, run_replay
 from footnav.app.config import defaults
+from footnav.device import unit as unit_module
+from footnav.device.emulator.motion.gait import simulate_walk
+from footnav.device.emulator.serving.faults import WireFaults
+from footnav.device.emulator.serving.pty import PtyShoeServer
 from footnav.device.files.capture import (
     FLUSH_PERIOD_S,
     CaptureInfo,
@@ -27,6 +34,7 @@ from footnav.device.files.capture import (
     read_capture_info,
     summarize_capture,
 )
+from footnav.device.protocol.framer import Framer
 from footnav.pipeline.errors import FootnavError, InputFormatError
 from footnav.pipeline.nav_types import NavBatch, concat_batches
 from mcap.writer import Writer
@@ -266,3 +274,55 @@ def test_a_window_mid_walk_starts_from_the_state_the_capture_had_there(tmp_path:
     np.testing.assert_array_equal(part.pos_n_m, full.pos_n_m[k : k + len(part)])  # the same estimates
     with pytest.raises(FootnavError, match=r"--start 500 s is after the end of the capture \(20\.0 s of device"):
         replay(path, start_s=500.0)
+
+
+WIRES = {
+    # packets lost, repeated, reordered: every byte in a frame, the reads joined are framed in one pass
+    "numbers": (WireFaults(drop_rate=0.003, duplicate_rate=0.003, reorder_rate=0.003), None, "split_by_read"),
+    # bit errors and garbage: the reads with bytes in no frame are framed read by read
+    "bytes": (WireFaults(bit_error_rate=5e-5), 40, "rewind"),
+}
+
+
+@pytest.mark.parametrize("wire", WIRES)
+def test_a_faulty_wire_replays_exactly_with_reads_joined(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, wire: str
+) -> None:
+    """Faults on the wire: the full-speed replay frames its joined reads in one pass where it can (clean
+    stretches decoded at once, each packet stamped with its own read's host time; the others read by read)
+    and gives the live session's estimates bit for bit."""
+    faults, garbage_every, path_taken = WIRES[wire]
+    walk = simulate_walk("rectangle", 20.0, rate_hz=1000.0, seed=3)
+    cfg = defaults()
+    cfg.set("session.sessions_dir", str(tmp_path), "test")
+    live: list[NavBatch] = []
+
+    async def session(server: PtyShoeServer) -> None:
+        opts = LiveOptions(ports={"foot": server.port}, config=cfg, viewer=False, collect=lambda _f: live.append)
+        task = asyncio.create_task(live_session(opts))
+        async with asyncio.timeout(120):
+            seen = -1
+            while not (server.finished.is_set() and seen == sum(len(b) for b in live)) and not task.done():
+                seen = sum(len(b) for b in live)
+                await asyncio.sleep(0.5)
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+
+    with PtyShoeServer(
+        walk.t_s, walk.acc_b_mps2, walk.gyr_b_radps, speed=4.0, faults=faults, garbage_every=garbage_every, seed=5
+    ) as server:
+        asyncio.run(session(server))
+    (path,) = tmp_path.glob("*.mcap")
+    calls: list[str] = []
+    split, rewind = unit_module.split_by_read, Framer.rewind
+    # spies: which way the joined reads went
+    monkeypatch.setattr(unit_module, "split_by_read", lambda *a: calls.append("split_by_read") or split(*a))
+    monkeypatch.setattr(Framer, "rewind", lambda *a: calls.append("rewind") or rewind(*a))
+    again = replay(path)["foot"]
+    live_nav = concat_batches(live)
+    assert len(live_nav) > 15_000 and path_taken in calls
+    assert len(again) >= len(live_nav)  # the live session was stopped; the capture holds all it read
+    for name in FIELDS:
+        x, y = np.asarray(getattr(live_nav, name)), np.asarray(getattr(again, name))[: len(live_nav)]
+        np.testing.assert_array_equal(x, y, err_msg=name)

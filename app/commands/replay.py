@@ -56,7 +56,7 @@ from footnav.pipeline.two_feet.live import FEET_COUPLINGS, lockstep_for
 from footnav.views.lsl import LslRequest, lsl_feet
 from footnav.views.outputs import open_session_views
 
-FULL_SPEED_JOIN_SAMPLES = 1000
+FULL_SPEED_JOIN_SAMPLES = 5000
 """A replay at full speed passes the IMU samples on in batches of about this many (a captured read
 holds about 30 at 1 kHz): the same estimates, a fraction of the per-batch cost."""
 REPLAY_PUT_TIMEOUT_S = 60.0
@@ -378,7 +378,6 @@ def run_replay(opts: ReplayOptions) -> int:
             expect_samples=expect if (isinstance(expect, int) and not windowed) else None,
             status=status.foot(run.foot),
             result=run.result,
-            host_clock=link.captured_ns,
             idle_notice_s=None,
             window=(opts.start_s, opts.end_s) if windowed else None,
             on_window=lambda: setattr(link, "paced", True),

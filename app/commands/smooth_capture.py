@@ -129,7 +129,6 @@ def captured_samples(source: Path, summary: CaptureSummary, cfg: Config) -> dict
                 start=True,  # the same handshake as live: the unit's answers are in the capture
                 rate_divider_log2=int(settings.get("rate_divider_log2", 0)),
                 expect_samples=expect if isinstance(expect, int) else None,
-                host_clock=link.captured_ns,
                 idle_notice_s=None,
                 calibration=capture_calibration_lookup(summary, cfg, unit.foot),
                 join_samples=FULL_SPEED_JOIN_SAMPLES,

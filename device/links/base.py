@@ -33,3 +33,13 @@ class ByteLink(Protocol):
     async def close(self) -> None:
         """Release the transport (idempotent)."""
         ...
+
+
+class StampedByteLink(ByteLink, Protocol):
+    """A link whose reads carry their own host time (a replay: the time each read had live). The unit driver
+    then takes those stamps instead of ``time.monotonic_ns()`` after each read."""
+
+    async def read_stamped(self) -> list[tuple[bytes, int]]:
+        """One or more consecutive reads, each with its host time (``time.monotonic_ns()`` scale, ns); []
+        after close."""
+        ...

@@ -11,7 +11,6 @@ import asyncio
 import contextlib
 import json
 import time
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,13 +46,19 @@ class LostStretch:
         return (self.after_ns - self.before_ns) / 1e9
 
 
-class CaptureReplayLink:
-    """A :class:`footnav.device.links.base.ByteLink` that returns one unit's captured device -> host bytes, one
-    captured read per :meth:`read`, so the unit driver frames and batches them exactly as it did live.
+JOIN_BYTES = 65536
+"""At full speed :meth:`CaptureReplayLink.read_stamped` returns captured reads up to about this many bytes at
+once (about 2 s of a 1 kHz IMU stream)."""
 
-    Host timestamps: the driver stamps a batch with ``time.monotonic_ns()`` right after ``read``
-    returns. :meth:`captured_ns` maps such a replay-time stamp back to the captured read's host time,
-    so replayed estimates carry the live session's ``host_ns``.
+
+class CaptureReplayLink:
+    """A :class:`footnav.device.links.base.StampedByteLink` that returns one unit's captured device -> host
+    bytes with the host time each read had live, so the unit driver frames and batches them exactly as it
+    did live and replayed estimates carry the live session's ``host_ns``.
+
+    :meth:`read_stamped` returns one captured read, or at full speed as many as follow each other up to
+    :data:`JOIN_BYTES` and the next host write (the driver decodes them in one pass, each packet stamped
+    with its own read's time; what the unit answered to a command comes after the driver has sent it).
 
     Parameters
     ----------
@@ -98,7 +103,7 @@ class CaptureReplayLink:
         self._origin = clock_origin if clock_origin is not None else []
         self._on_progress = on_progress
         self._it = iter_capture(self.path, self.state)
-        self._stamps: deque[tuple[int, int]] = deque()  # (replay monotonic ns at return, captured ns)
+        self._ahead: CaptureMessage | None = None  # a read taken past a host write, returned next
         self._closed = False
         self.writes: list[bytes] = []
         """Bytes the host wrote during the replay (nothing is sent anywhere)."""
@@ -107,7 +112,13 @@ class CaptureReplayLink:
     def name(self) -> str:
         return f"{self.path.name} [{self.foot}]"
 
-    def _next_rx(self) -> CaptureMessage | None:
+    def _next_rx(self) -> tuple[CaptureMessage | None, bool]:
+        """The next captured read of this unit (None at the end), and whether the host wrote to the unit
+        after the read before it."""
+        if self._ahead is not None:
+            ahead, self._ahead = self._ahead, None
+            return ahead, True
+        wrote = False
         for item in self._it:
             if isinstance(item, CaptureInfo):
                 if self.foot not in item.feet:
@@ -121,12 +132,13 @@ class CaptureReplayLink:
                     self.events.append(json.loads(item.data))
                 continue
             if item.direction != "rx":
+                wrote = True
                 continue
             self._note_gaps(item.host_ns)
             self._last_ns = item.host_ns
-            return item
+            return item, wrote
         self._note_gaps(None)
-        return None
+        return None, wrote
 
     def _note_gaps(self, after_ns: int | None) -> None:
         for gap in self.state.gaps[self._gaps_seen :]:
@@ -134,41 +146,44 @@ class CaptureReplayLink:
         self._gaps_seen = len(self.state.gaps)
 
     async def read(self) -> bytes:
-        """The next captured read; ``b""`` at the end of the capture or the window."""
+        """The bytes of :meth:`read_stamped`; ``b""`` at the end of the capture or the window."""
+        return b"".join(data for data, _ in await self.read_stamped())
+
+    async def read_stamped(self) -> list[tuple[bytes, int]]:
+        """The next captured read and its captured host time (ns), paced by :attr:`speed` (not in a window's
+        lead-in); at full speed the reads that follow it too, up to :data:`JOIN_BYTES` in all and up to the
+        next host write; [] at the end of the capture or the window."""
         if self._closed:
-            return b""
-        item = self._next_rx()
+            return []
+        item, _ = self._next_rx()
         if item is None:
             self._closed = True
-            return b""
+            return []
         if self.paced and not self._origin:
             self._origin[:] = [time.monotonic_ns(), item.host_ns]
-        if not self.paced:
-            pass  # a window's lead-in: decoded at once
-        elif self.speed != float("inf"):
+        reads = [(item.data, item.host_ns)]
+        if self.speed == float("inf"):
+            size = len(item.data)
+            while size < JOIN_BYTES:
+                more, wrote = self._next_rx()
+                if more is None:
+                    break
+                if wrote:  # live, the driver had sent a command before this read: it goes after that
+                    self._ahead = more
+                    break
+                reads.append((more.data, more.host_ns))
+                size += len(more.data)
+            await asyncio.sleep(0)  # let the other foot and the sinks run
+        elif self.paced:
             due_ns = self._origin[0] + (item.host_ns - self._origin[1]) / self.speed
             delay = (due_ns - time.monotonic_ns()) / 1e9
             if delay > 0:
                 await asyncio.sleep(delay)
-        elif self.reads % 64 == 0:
-            await asyncio.sleep(0)  # let the other foot and the sinks run
-        self.reads += 1
-        if self._on_progress is not None and self.reads % 256 == 0:
+        before = self.reads
+        self.reads += len(reads)
+        if self._on_progress is not None and self.reads // 256 != before // 256:
             self._on_progress(self.state.bytes_read, self.state.size)
-        self._stamps.append((time.monotonic_ns(), item.host_ns))
-        return item.data
-
-    def captured_ns(self, replay_ns: int) -> int:
-        """The captured host time of the read that a driver stamped ``replay_ns`` (see class doc).
-
-        Stamps must be asked for in increasing order (batches arrive in order).
-        """
-        stamps = self._stamps
-        while len(stamps) > 1 and stamps[1][0] <= replay_ns:
-            stamps.popleft()
-        if not stamps:
-            return replay_ns
-        return stamps[0][1]
+        return reads
 
     async def write(self, data: bytes) -> None:
         """Commands go nowhere in a replay; kept for inspection."""

@@ -14,10 +14,10 @@ decides. Source: ``hcarlsso/openshoe-framework:src/external_interfaces/external_
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import re
 from collections.abc import Iterable
-from dataclasses import dataclass
 from typing import Final, NamedTuple
 
 import numpy as np
@@ -72,7 +72,7 @@ _RUN_WINDOW: Final = 512
 """Packets checked per vectorised step (the copy made per step is this many packets at most)."""
 
 
-@dataclass(slots=True)
+@dataclasses.dataclass(slots=True)
 class FramerStats:
     """Running counts since the framer was created."""
 
@@ -108,6 +108,16 @@ class Framer:
         """Bytes held back as the possible start of a frame."""
         return len(self._buf)
 
+    def checkpoint(self) -> tuple[bytes, FramerStats]:
+        """The framer's state, for :meth:`rewind`."""
+        return bytes(self._buf), dataclasses.replace(self.stats)
+
+    def rewind(self, point: tuple[bytes, FramerStats]) -> None:
+        """Back to the state of :meth:`checkpoint` ``point``, as if nothing had been fed since."""
+        self._buf[:] = point[0]
+        for name in FramerStats.__dataclass_fields__:
+            setattr(self.stats, name, getattr(point[1], name))
+
     def feed(self, data: bytes | bytearray | memoryview) -> list[Frame]:
         """Add received bytes; return the frames they complete, in stream order."""
         out: list[Frame] = []
@@ -118,13 +128,18 @@ class Framer:
                 out.append(item)  # type: ignore[arg-type]
         return out
 
-    def feed_runs(self, data: bytes | bytearray | memoryview) -> list[Frame | PacketRun]:
+    def feed_runs(
+        self, data: bytes | bytearray | memoryview, starts: list[int] | None = None
+    ) -> list[Frame | PacketRun]:
         """As :meth:`feed`, with stretches of same-length valid packets returned as one :class:`PacketRun`.
 
         A stream of one packet kind then costs a few numpy operations per read instead of a Python
         iteration per packet; the first invalid packet ends a run and is handled byte by byte.
+        ``starts``, if given, gets the offset in ``data`` of each returned frame's first byte (negative:
+        it began in bytes held from an earlier call).
         """
         buf = self._buf
+        held = len(buf)
         buf += data
         n = len(buf)
         accepted = self._accepted
@@ -147,6 +162,8 @@ class Framer:
                         run = _run_at(buf, i, length)
                         if run is not None:
                             append(run)
+                            if starts is not None:
+                                starts.append(i - held)
                             n_packets += len(run)
                             i += len(run) * (length + 6)
                             continue
@@ -155,6 +172,8 @@ class Framer:
                         break
                     if sum(buf[i:end]) & 0xFFFF == (buf[end] << 8 | buf[end + 1]):
                         append(DataPacket(buf[i + 1] << 8 | buf[i + 2], bytes(buf[i + 4 : end])))
+                        if starts is not None:
+                            starts.append(i - held)
                         n_packets += 1
                         i = end + 2
                         continue
@@ -164,6 +183,8 @@ class Framer:
                     break
                 if (buf[i + 2] << 8 | buf[i + 3]) == ACK_HEADER + buf[i + 1]:
                     append(DeviceAck(buf[i + 1]))
+                    if starts is not None:
+                        starts.append(i - held)
                     stats.acks += 1
                     i += 4
                     continue
@@ -175,6 +196,45 @@ class Framer:
         stats.packets += n_packets
         del buf[:i]
         return out
+
+
+def split_by_read(
+    frames: list[Frame | PacketRun], starts: list[int], read_ends: NDArray[np.int64]
+) -> list[list[Frame | PacketRun]]:
+    """``frames`` of one :meth:`Framer.feed_runs` call over several reads joined, as each read alone would
+    have completed them: per read, the frames whose last byte it holds (a run split where a read ends).
+
+    Parameters
+    ----------
+    frames, starts
+        the frames and their first bytes' offsets in the joined bytes (``feed_runs(joined, starts)``).
+    read_ends
+        (r,) offset in the joined bytes just after each read's last byte, increasing.
+
+    Returns
+    -------
+    list[list[Frame | PacketRun]]
+        r lists, in stream order.
+    """
+    out: list[list[Frame | PacketRun]] = [[] for _ in range(len(read_ends))]
+    for frame, start in zip(frames, starts, strict=True):
+        if type(frame) is PacketRun:
+            ends = packet_ends(frame, start)
+            read_of = np.searchsorted(read_ends, ends)
+            cuts = np.flatnonzero(np.diff(read_of)) + 1
+            for a, b in zip([0, *cuts.tolist()], [*cuts.tolist(), len(frame)], strict=True):
+                heads = None if frame.heads is None else frame.heads[a:b]
+                out[int(read_of[a])].append(PacketRun(frame.numbers[a:b], frame.payloads[a:b], heads))
+        else:
+            size = 4 if type(frame) is DeviceAck else len(frame.payload) + PACKET_OVERHEAD  # type: ignore[union-attr]
+            out[int(np.searchsorted(read_ends, start + size))].append(frame)
+    return out
+
+
+def packet_ends(run: PacketRun, start: int) -> NDArray[np.int64]:
+    """(m,) offset just after each packet of ``run``, which begins at offset ``start``."""
+    stride = int(run.payloads.shape[1]) + PACKET_OVERHEAD
+    return start + stride * np.arange(1, len(run) + 1, dtype=np.int64)
 
 
 def data_numbers(frames: list[Frame | PacketRun]) -> tuple[NDArray[np.int64], int | None]:
