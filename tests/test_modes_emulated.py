@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 import pytest
+from footnav.device.emulator.firmware import ShoeFirmware
 from footnav.device.emulator.motion.floors import floor_of
 from footnav.device.emulator.motion.gait import GaitTruth, simulate_walk
 from footnav.device.emulator.scripts import (
@@ -263,3 +264,23 @@ async def test_link_budget_caps_the_byte_rate() -> None:
             await unit.stop()
     rate = sum(len(b) for b in got) * 34 / elapsed
     assert 0.7 * BT_UART_BUDGET_BPS < rate < 1.15 * BT_UART_BUDGET_BPS
+
+
+@pytest.mark.parametrize("again_after_events", range(1, 9))
+def test_a_start_sent_again_while_streaming_outputs_each_sample_once(again_after_events: int) -> None:
+    """The reconnect's resume sequence replays the start command while the unit streams: the firmware must
+    go on where it is (an earlier emulator re-sent the sample at the command's instant when one fell on it)."""
+    n, interval_s = 300, 0.0075  # 7.5 ms connection events: every other one ends on a 1 kHz sample
+    t, acc, gyr, _, _ = synth(n)
+    fw = ShoeFirmware(t, acc, gyr, speed=1.0)
+    fw.receive(protocol.normal_imu_command(), 0.0)
+    now = 0.0
+    for event in range(1, 30):
+        now += interval_s
+        fw.produce(now)
+        if event == again_after_events:
+            fw.receive(protocol.normal_imu_command(), now)
+    fw.produce(now + 1.0)
+    frames = Framer().feed(b"".join(data for data, _ in fw.out))
+    numbers = [f.number for f in frames if isinstance(f, DataPacket)]
+    assert numbers == list(range(1, n + 1))

@@ -175,6 +175,7 @@ class ShoeFirmware:
         self._wall0 = 0.0
         self._dev_now = float(self._t[0]) if n else 0.0
         self._dev_now_at_start = self._dev_now
+        self._emitted_until = -math.inf  # device time of the latest item output
         self._outputs_ever = False
         self._step_base = 0
         self._queue: deque[tuple[int | None, bytes]] = deque()
@@ -277,7 +278,9 @@ class ShoeFirmware:
     ) -> None:
         self._start_clock(now)
         t_now = self._dev_time(now)
-        if math.isinf(self.speed) and self._outputs_ever:
+        if (math.isinf(self.speed) and self._outputs_ever) or t_now <= self._emitted_until:
+            # an output (re)started where items were just sent begins after them: a start command sent
+            # again while streaming outputs no sample twice
             cursor = int(np.searchsorted(times, t_now, side="right"))
         else:
             cursor = int(np.searchsorted(times, t_now, side="left"))
@@ -313,6 +316,7 @@ class ShoeFirmware:
             return
         total = sum(t.shape[0] for t, _ in taken)
         self._dev_now = max(self._dev_now, *(float(t[-1]) for t, _ in taken))
+        self._emitted_until = max(self._emitted_until, self._dev_now)
         first = self._next_number
         self._next_number = (first + total) & 0xFFFF
         if len(taken) == 1 and not self._lossless:
