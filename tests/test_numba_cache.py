@@ -85,3 +85,42 @@ def test_a_first_run_builds_the_filter_in_a_second_process_and_compiles_nothing_
         assert kernels["run_filter_kernel"] == [1, 0, 1]  # built by the child, loaded from the cache
     else:
         assert kernels["run_filter_kernel"] == [0, 1, 1]  # one core: compiled here, as before
+
+
+_FIRST_EXPORT = """
+import json, sys
+from footnav.app.cli import main
+from footnav.app.commands import export
+from footnav.device.files.table_csv import _render
+from footnav.pipeline.navigation import warm
+from footnav.pipeline.navigation._kernels import run_filter_kernel
+built = []
+def build_and_note(also=None):  # the real build, then what it left compiled
+    warm.build_kernels(also)
+    built.append(len(_render.overloads))
+export.build_kernels = build_and_note
+main(["export", sys.argv[1], "-o", sys.argv[2]])
+print(json.dumps({"cores": warm._cores(), "built": built, "kernels": {
+    k.py_func.__name__: [sum(k.stats.cache_hits.values()), sum(k.stats.cache_misses.values()), len(k.overloads)]
+    for k in (_render, run_filter_kernel)}}))
+"""
+
+
+def test_a_first_export_compiles_the_csv_writer_beside_the_filter_and_once(tmp_path: Path) -> None:
+    """``footnav export`` to CSV with an empty cache: the writer's kernel is compiled by the build, while the
+    child compiles the filter, with the types the writer then calls it with (one overload, no second compile)."""
+    walk, track = tmp_path / "walk.csv", tmp_path / "track.csv"
+    from benchmarks.startup import write_walk_csv
+
+    write_walk_csv(walk, 0.5)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    out = subprocess.run(
+        [sys.executable, "-c", _FIRST_EXPORT, str(walk), str(track)],
+        env=env, capture_output=True, text=True, check=True, timeout=600,
+    )  # fmt: skip
+    report = json.loads(out.stdout.strip().splitlines()[-1])
+    two_cores = report["cores"] >= 2
+    assert report["built"] == [1 if two_cores else 0]  # compiled by the build (one core: none, as before)
+    assert report["kernels"]["_render"] == [0, 1, 1]
+    assert report["kernels"]["run_filter_kernel"] == ([1, 0, 1] if two_cores else [0, 1, 1])
+    assert track.read_text().count("\n") == 1 + 6000  # header and every sample (30 s at 200 Hz)

@@ -19,6 +19,7 @@ import numpy as np
 from footnav.app.status import input_handling, lead_in_note
 from footnav.device.files.capture import MCAP_MAGIC
 from footnav.device.files.recordings import CsvMapping, Recording, load_recording
+from footnav.device.files.table_csv import build_kernel as build_csv_kernel
 from footnav.device.files.table_csv import write_table_csv
 from footnav.device.files.table_parquet import require_pyarrow, write_table_parquet
 from footnav.pipeline.aiding.tof_types import TofConfig
@@ -30,6 +31,7 @@ from footnav.pipeline.navigation.lead_in import RecordingRun, navigate_every_sam
 from footnav.pipeline.navigation.navigator import NavConfig, NavStats, navigate
 from footnav.pipeline.navigation.profiles import get_profile
 from footnav.pipeline.navigation.saturation import reconstruct_saturated_rates
+from footnav.pipeline.navigation.warm import build_kernels
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
@@ -302,7 +304,9 @@ def run_export(
     """Load, navigate and write the track (as :func:`write_track`, in ``out_format`` or as ``out``'s suffix says;
     and, with ``steps_out``, its steps; with ``gait_out``, its strides' gait parameters,
     ``footnav.app.api.gait_export``); returns a one-line summary (and the gait's summary line)."""
-    track_format(out, out_format)  # a name that contradicts the format is refused before any work
+    written_as = track_format(out, out_format)  # a name that contradicts the format is refused before any work
+    # on a first run the CSV writer's kernel compiles while a child compiles the filter's
+    also = build_csv_kernel if written_as == "csv" else None
     if _is_capture(source):
         options = (("--format", fmt), ("--columns", columns), ("--profile", profile))
         given = [name for name, v in options if v] + ([] if stance_levels else ["--no-stance-levels"])
@@ -311,8 +315,10 @@ def run_export(
                 f"{source} is a footnav capture, exported with the settings it was recorded with; "
                 f"drop {', '.join(given)}"
             )
+        build_kernels(also)
         return export_capture(source, out, steps_out, smooth=smooth, gait_out=gait_out, out_format=out_format)
     rec = load_other_recording(source, fmt, columns)
+    build_kernels(also)
     nav, stats = navigate_recording(rec, profile, smooth, stance_levels)
     write_track(nav, out, out_format)
     # a step's covariance is the growth of the causal filter's between its epochs; the lead-in's shrinks towards

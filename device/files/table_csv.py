@@ -202,6 +202,11 @@ def format_rows(table: NDArray[np.float64], integer_columns: frozenset[int] = fr
     return b"".join(parts)
 
 
+def build_kernel() -> None:
+    """Compile the renderer (by formatting one row with an integer column): the argument types of every call."""
+    format_rows(np.zeros((1, 2)), frozenset({1}))
+
+
 def write_table_csv(
     path: Path, header: tuple[str, ...], table: NDArray[np.float64], integer_columns: frozenset[int] = frozenset()
 ) -> None:

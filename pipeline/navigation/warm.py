@@ -9,7 +9,8 @@ both groups one after the other. :func:`build_kernels` compiles the filter's gro
 while this one compiles the detector's; both write numba's on-disk cache (the folder
 ``footnav.pipeline`` keys by its sources), which this process then loads the filter from. Each group
 is compiled by calling it on a few synthetic samples with the argument types a navigator passes, so
-the navigator's own calls find them in the cache. Why and what it saves:
+the navigator's own calls find them in the cache. A command adds its other kernels to this process's
+share (``also``: ``footnav export``'s CSV writer). Why and what it saves:
 docs/design/estimator.md, "Compiled filter kernels".
 """
 
@@ -18,6 +19,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -80,9 +82,10 @@ def build_filter_kernels() -> None:
     )  # fmt: skip
 
 
-def build_kernels() -> None:
+def build_kernels(also: Callable[[], object] | None = None) -> None:
     """Once per process: when the cache is empty and two cores are free to use, compile the filter's
-    kernels in a child process while this one compiles the detector's, then wait for the child.
+    kernels in a child process while this one compiles the detector's, and then what ``also`` compiles
+    (a command's other kernels, e.g. ``footnav export``'s CSV writer), then wait for the child.
     Otherwise nothing: each kernel is compiled (or loaded) when first called, as always."""
     if _BUILT:
         return
@@ -95,5 +98,7 @@ def build_kernels() -> None:
     )
     try:
         build_detector_kernels()
+        if also is not None:
+            also()
     finally:
         child.wait()
