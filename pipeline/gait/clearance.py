@@ -64,9 +64,9 @@ class StrideClearanceTracker:
         out_max: list[float] = []
         edges = np.flatnonzero(st[1:] != st[:-1]) + 1
         bounds = np.concatenate([[0], edges, [st.size]])
-        for a, b in itertools.pairwise(bounds.tolist()):
-            if a == b:
-                continue
+        # swings that begin after a stance of this batch and end before its last run: all at once when finite
+        inner = _inner_swings(t_s, clearance_m, st, bounds) if bounds.size > 4 else None
+        for r, (a, b) in enumerate(itertools.pairwise(bounds.tolist())):
             if st[a]:
                 if self._in_swing and self._t:
                     self._finish(float(t_s[a]), out_t, out_min, out_max)
@@ -75,9 +75,13 @@ class StrideClearanceTracker:
                 self._t, self._c = [], []
             else:
                 self._in_swing = self._seen_stance
-                if self._in_swing:
+                if self._in_swing and (inner is None or r == 0 or b == st.size):
                     self._t.append(t_s[a:b])
                     self._c.append(clearance_m[a:b])
+        if inner is not None:
+            out_t += inner.t_s.tolist()
+            out_min += inner.min_m.tolist()
+            out_max += inner.max_m.tolist()
         if not out_t:
             return None
         return StrideClearance(np.asarray(out_t), np.asarray(out_min), np.asarray(out_max))
@@ -111,3 +115,25 @@ class StrideClearanceTracker:
         out_t.append(t_end)
         out_min.append(float(np.min(c_mid)))
         out_max.append(float(np.max(c)))
+
+
+def _inner_swings(
+    t_s: F64, clearance_m: F64, stance: NDArray[np.bool_], bounds: NDArray[np.int64]
+) -> StrideClearance | None:
+    """What :meth:`StrideClearanceTracker._finish` gives, for every swing run of a batch between its first and its
+    last run (each preceded and followed by a stance run of the batch), at once: ``bounds`` (k + 1,) the runs' first
+    indices and the batch length. None when a time or clearance is not finite (the per-swing path handles those)."""
+    if not (np.isfinite(t_s).all() and np.isfinite(clearance_m).all()):
+        return None
+    first, end = bounds[:-1], bounds[1:]
+    t0, t1 = t_s[first], t_s[end - 1]
+    lo, hi = t0 + 0.25 * (t1 - t0), t0 + 0.75 * (t1 - t0)
+    length = end - first
+    mid = (t_s >= np.repeat(lo, length)) & (t_s <= np.repeat(hi, length))
+    min_mid = np.minimum.reduceat(np.where(mid, clearance_m, np.inf), first)
+    has_mid = np.logical_or.reduceat(mid, first)
+    max_all = np.maximum.reduceat(clearance_m, first)
+    inner = np.zeros(first.size, dtype=np.bool_)
+    inner[1:-1] = ~stance[first[1:-1]]
+    keep = inner & (t1 - t0 >= MIN_SWING_S) & has_mid
+    return StrideClearance(t_s[end[keep]], min_mid[keep], max_all[keep])

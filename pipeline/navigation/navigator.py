@@ -21,6 +21,7 @@ from footnav.pipeline.aiding.tof_types import RangeBatch, RangeOutputs, TofConfi
 from footnav.pipeline.gait.clearance import StrideClearanceTracker
 from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.navigation import eskf
+from footnav.pipeline.navigation._kernels import run_filter_kernel
 from footnav.pipeline.navigation.alignment import Alignment, align_from_still, first_quiet_run, quiet_samples
 from footnav.pipeline.navigation.batches import clip_variance, implausible_to_nan, nav_batch, zupt_ratio
 from footnav.pipeline.navigation.params import FilterParams
@@ -477,24 +478,31 @@ class Navigator:
         assert self._x is not None
         n = still.shape[0]
         floor = np.empty(n)
-        stance_starts = true_runs(still)[0] if n else np.empty(0, dtype=np.int64)  # for each stance's floor below
+        levels, state, rejected = self.levels, self._filter_state, eskf.STATE_LAST_REJECTED
+        points = np.asarray(levels.update_points(still), dtype=np.int64)
+        # for an update after a stance sample of this batch, the stance's first sample here (-1: none): the
+        # samples from it on stand on the stance's level
+        firsts = np.full(points.shape[0] + 1, -1, dtype=np.int64)
+        on_stance = (points > 0) & still[np.maximum(points - 1, 0)]
+        if on_stance.any():
+            stance_starts = true_runs(still)[0]
+            firsts[:-1][on_stance] = stance_starts[np.searchsorted(stance_starts, points[on_stance] - 1, "right") - 1]
         a = 0
-        for b in [*self.levels.update_points(still), None]:  # None: the rest of the batch, with no update after it
+        for b, first in zip([*points.tolist(), None], firsts.tolist(), strict=True):  # None: the rest, no update
             end = n if b is None else b
-            floor[a:end] = self.levels.floor_z_m
+            floor[a:end] = levels.floor_z_m
             if end > a:
-                eskf.run_filter(
+                run_filter_kernel(
                     self._x, self._P, acc[a:end], gyr[a:end], gyr_var[a:end], dt[a:end], still[a:end], ratio[a:end],
-                    self._par, pos[a:end], vel[a:end], quat[a:end], cov[a:end], self._counters, self._filter_state,
+                    self._par, pos[a:end], vel[a:end], quat[a:end], cov[a:end], self._counters, state,
                 )  # fmt: skip
             # a stance whose update sample the filter found moving (``footnav.pipeline.navigation.eskf``) gives no level
-            if b is not None and not self._filter_state[eskf.STATE_LAST_REJECTED]:
-                self._x, self._P, z_level = self.levels.stance_update(self._x, self._P)
+            if b is not None and not state[rejected]:
+                self._x, self._P, z_level = levels.stance_update(self._x, self._P)
                 if self.level_updates is not None and math.isfinite(z_level):
                     self.level_updates.append((self.stats.samples_out + b - 1, z_level))
-                if b > 0 and still[b - 1]:  # this stance's samples in the batch are on its level
-                    first = int(stance_starts[np.searchsorted(stance_starts, b - 1, side="right") - 1])
-                    floor[first:b] = self.levels.floor_z_m
+                if first >= 0:
+                    floor[first:b] = levels.floor_z_m
             a = end
         return floor
 
