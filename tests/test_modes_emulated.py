@@ -284,3 +284,19 @@ def test_a_start_sent_again_while_streaming_outputs_each_sample_once(again_after
     frames = Framer().feed(b"".join(data for data, _ in fw.out))
     numbers = [f.number for f in frames if isinstance(f, DataPacket)]
     assert numbers == list(range(1, n + 1))
+
+
+def test_an_output_started_beside_a_streaming_one_sends_its_own_first_sample() -> None:
+    """Where another output has just sent the sample at the command's instant, a newly started output still
+    sends its own sample of that instant (each output resumes after what it sent itself)."""
+    n = 100
+    t, acc, gyr, imu_acc, imu_gyr = synth(n)
+    fw = ShoeFirmware(t, acc, gyr, speed=1.0, imu_acc_b_mps2=imu_acc, imu_gyr_b_radps=imu_gyr)
+    fw.receive(protocol.normal_imu_command(), 0.0)
+    fw.produce(0.0)  # the normal output's sample at t = 0 is sent
+    fw.receive(protocol.commands_for(fw.command_set).raw_imu(0b1111).frame, 0.0)
+    fw.produce(0.01)
+    frames = Framer().feed(b"".join(data for data, _ in fw.out))
+    packets = [f for f in frames if isinstance(f, DataPacket)]
+    raw = [p for p in packets if len(p.payload) != len(packets[0].payload)]
+    assert len(packets) - len(raw) == 11 and len(raw) == 11  # t = 0 .. 10 ms, each output

@@ -175,7 +175,7 @@ class ShoeFirmware:
         self._wall0 = 0.0
         self._dev_now = float(self._t[0]) if n else 0.0
         self._dev_now_at_start = self._dev_now
-        self._emitted_until = -math.inf  # device time of the latest item output
+        self._sent_until: dict[str, float] = {}  # per output, the device time of its latest item taken
         self._outputs_ever = False
         self._step_base = 0
         self._queue: deque[tuple[int | None, bytes]] = deque()
@@ -278,8 +278,8 @@ class ShoeFirmware:
     ) -> None:
         self._start_clock(now)
         t_now = self._dev_time(now)
-        if (math.isinf(self.speed) and self._outputs_ever) or t_now <= self._emitted_until:
-            # an output (re)started where items were just sent begins after them: a start command sent
+        if (math.isinf(self.speed) and self._outputs_ever) or t_now <= self._sent_until.get(key, -math.inf):
+            # an output (re)started where it just sent items begins after them: a start command sent
             # again while streaming outputs no sample twice
             cursor = int(np.searchsorted(times, t_now, side="right"))
         else:
@@ -305,6 +305,7 @@ class ShoeFirmware:
             if idx.size == 0:
                 continue
             o.cursor = int(idx[-1]) + o.step
+            self._sent_until[key] = float(o.times[idx[-1]])
             if o.once:
                 del self._outputs[key]
             taken.append((o.times[idx], o.encode(idx)))
@@ -316,7 +317,6 @@ class ShoeFirmware:
             return
         total = sum(t.shape[0] for t, _ in taken)
         self._dev_now = max(self._dev_now, *(float(t[-1]) for t, _ in taken))
-        self._emitted_until = max(self._emitted_until, self._dev_now)
         first = self._next_number
         self._next_number = (first + total) & 0xFFFF
         if len(taken) == 1 and not self._lossless:
