@@ -1,7 +1,5 @@
 """``python -m footnav.app`` runs the ``footnav`` command line."""
 
-import sys
+from footnav.app.cli import run
 
-from footnav.app.cli import main
-
-sys.exit(main())
+run()

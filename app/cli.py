@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import atexit
+import contextlib
 import logging
 import math
+import os
 import sys
+import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -265,13 +269,11 @@ def _scan(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from footnav.device.files.capture import MCAP_MAGIC
+    from footnav.device.files.capture_schema import starts_like_capture
 
-    try:
-        with args.file.open("rb") as f:
-            is_capture = f.read(len(MCAP_MAGIC)) == MCAP_MAGIC
-    except OSError:
-        is_capture = args.file.suffix.lower() == ".mcap"  # the command says what is wrong with it
+    is_capture = starts_like_capture(args.file)
+    if is_capture is None:  # unreadable: the command says what is wrong with it
+        is_capture = args.file.suffix.lower() == ".mcap"
     return _replay_capture(args) if is_capture else _replay_recording(args)
 
 
@@ -409,8 +411,39 @@ def _recordings_whole(code: int) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``footnav`` console script."""
+    """The ``footnav`` command line on ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
     argv = sys.argv[1:] if argv is None else argv
+    args = _parse(argv)
+    return _run_command(args, argv)
+
+
+def run() -> None:
+    """Entry point of the ``footnav`` console script (and ``python -m footnav.app``): :func:`main`, then exit.
+
+    After a command that writes only plain files (:data:`PLAIN_FILE_COMMANDS`) with no other thread left, the
+    process runs its exit handlers, flushes its streams and ends (``os._exit``) without the interpreter's
+    teardown of numba's and LLVM's objects, which takes longer than navigating a 10-minute walk
+    (``benchmarks.startup``; design page "Start-up").
+    """
+    argv = sys.argv[1:]
+    args = _parse(argv)
+    code = _run_command(args, argv)
+    if args.command in PLAIN_FILE_COMMANDS and threading.active_count() == 1:
+        atexit._run_exitfuncs()
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(OSError, ValueError):  # a closed pipe: what could be said is said
+                stream.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
+PLAIN_FILE_COMMANDS = frozenset({"export", "evaluate", "config"})
+"""Commands whose outputs are files closed before they return: no Rerun stream, capture or outlet is left to
+the interpreter's teardown."""
+
+
+def _parse(argv: list[str]) -> argparse.Namespace:
+    """``argv`` parsed (``parser.error`` exits with 2 on bad options)."""
     parser = build_parser()
     args, rest = parser.parse_known_args(argv)
     if args.command == "experiment":  # its own parser, built when it runs
@@ -419,6 +452,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
     if getattr(args, "keep_web", False) and not args.web:
         parser.error("--keep-web keeps the web viewer of --web: give --web too")
+    return args
+
+
+def _run_command(args: argparse.Namespace, argv: list[str]) -> int:
+    """Run the parsed command; returns its exit code (2 with a :class:`FootnavError`, said on stderr)."""
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="footnav: %(message)s")
     if not args.verbose:  # sessions report link events themselves (terminal, recording, capture)
         logging.getLogger("footnav.device.links.reconnecting").setLevel(logging.ERROR)
@@ -447,4 +485,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

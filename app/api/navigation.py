@@ -23,11 +23,11 @@ from typing import TYPE_CHECKING, Literal, overload
 import numpy as np
 from footnav.app.commands.export import (
     EXPORT_COLUMNS,
-    _is_capture,
     load_other_recording,
     navigate_recording,
     write_track_parquet,
 )
+from footnav.device.files.capture_schema import starts_like_capture
 from footnav.device.files.recordings import Recording, _nominal_rate
 from footnav.pipeline.errors import FootnavError, MissingExtraError
 from footnav.pipeline.gait import parameters
@@ -265,7 +265,7 @@ def read_recording(
         that foot (a unit's own solution, a dual-IMU board's two IMUs).
     """
     file = Path(path)
-    if _is_capture(file):
+    if starts_like_capture(file):
         if format is not None or columns is not None:
             raise FootnavError(f"{file} is a footnav capture: format and columns are for recordings of other tools")
         return _capture_recording(file, foot)

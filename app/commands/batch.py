@@ -186,12 +186,12 @@ def export_destinations(paths: Iterable[Path], files: list[Path], out_dir: Path,
 def find_export_inputs(paths: Iterable[Path]) -> list[Path]:
     """As ``footnav.app.commands.evaluate.find_recordings``, with footnav's captures (``.mcap``) in folders too."""
     from footnav.app.commands.evaluate import find_recordings
-    from footnav.app.commands.export import _is_capture
+    from footnav.device.files.capture_schema import starts_like_capture
 
     found: list[Path] = []
     for p in paths:
         if p.is_dir():
-            captures = {q for q in p.rglob("*") if q.is_file() and _is_capture(q)}
+            captures = {q for q in p.rglob("*") if q.is_file() and starts_like_capture(q)}
             found.extend(sorted(set(find_recordings([p])) | captures))
         else:
             found.extend(find_recordings([p]))

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from footnav.app.commands.export import lead_in_note, navigate_recording
 from footnav.app.status import input_handling
-from footnav.device.files.capture import MCAP_MAGIC
+from footnav.device.files.capture_schema import starts_like_capture
 from footnav.device.files.recordings import Recording, detect_format, load_recording
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.metrics import armse_2d_pyshoe, ate, loop_closure_error, path_length_m
@@ -69,7 +69,7 @@ def evaluate_file(path: Path, smooth: str | None = None, stance_levels: bool = T
         the file is not a recording footnav reads, has no ground truth and is not a known closed loop
         (a footnav capture among them), or never stands still.
     """
-    if _is_capture(path):
+    if starts_like_capture(path):
         raise FootnavError(
             f"{path} is a footnav capture: it records no ground truth and no known closed loop, so there is "
             "nothing to measure it against (`footnav export` writes its track, `footnav replay` shows it)"
@@ -177,14 +177,6 @@ def _measurable(rec: Recording, path: Path) -> Recording:
     if rec.gt_pos_m is None and not rec.closed_loop:
         raise FootnavError(f"{path}: no ground truth and not a known closed loop; nothing to measure against")
     return rec
-
-
-def _is_capture(path: Path) -> bool:
-    try:
-        with path.open("rb") as f:
-            return f.read(len(MCAP_MAGIC)) == MCAP_MAGIC
-    except OSError:
-        return False  # the loader says what is wrong with it
 
 
 def find_recordings(paths: Iterable[Path]) -> list[Path]:

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from footnav.app.status import input_handling, lead_in_note
-from footnav.device.files.capture import MCAP_MAGIC
+from footnav.device.files.capture_schema import starts_like_capture
 from footnav.device.files.recordings import CsvMapping, Recording, load_recording
 from footnav.device.files.table_csv import build_kernel as build_csv_kernel
 from footnav.device.files.table_csv import write_table_csv
@@ -307,7 +307,7 @@ def run_export(
     written_as = track_format(out, out_format)  # a name that contradicts the format is refused before any work
     # on a first run the CSV writer's kernel compiles while a child compiles the filter's
     also = build_csv_kernel if written_as == "csv" else None
-    if _is_capture(source):
+    if starts_like_capture(source):
         options = (("--format", fmt), ("--columns", columns), ("--profile", profile))
         given = [name for name, v in options if v] + ([] if stance_levels else ["--no-stance-levels"])
         if given:
@@ -429,15 +429,6 @@ def load_other_recording(path: Path, fmt: str | None, columns: str | None) -> Re
         if "unknown recording format" not in str(exc):
             raise
         raise InputFormatError(f"{exc}; or a footnav capture (.mcap)") from None
-
-
-def _is_capture(path: Path) -> bool:
-    """The file starts with MCAP's magic bytes (footnav's captures; ``footnav.app.commands.replay`` checks the rest)."""
-    try:
-        with path.open("rb") as f:
-            return f.read(len(MCAP_MAGIC)) == MCAP_MAGIC
-    except OSError:
-        return False  # the loaders say what is wrong with it
 
 
 def export_capture(

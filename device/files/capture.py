@@ -49,7 +49,7 @@ from footnav.device.files.capture_records import (
     summary_crc_ok,
 )
 from footnav.device.files.capture_records import RecordState as ReadState
-from footnav.device.files.capture_schema import check_session, checked_unit_fields
+from footnav.device.files.capture_schema import MCAP_MAGIC, check_session, checked_unit_fields
 from footnav.pipeline.errors import InputFormatError
 from mcap.reader import make_reader
 from mcap.records import Channel, Header, Message
@@ -69,8 +69,6 @@ CHUNK_BYTES: Final = 1 << 18
 """A chunk also closes at this many uncompressed bytes. Paced in real time a unit sends about 47 kB a
 second, so chunks close on :data:`FLUSH_PERIOD_S`; a replay or ``--pace max`` fills one faster, and
 at 1 MiB one compressed chunk came near 1 MB: what a crash or a full disk loses at once."""
-MCAP_MAGIC: Final = b"\x89MCAP0\r\n"
-"""The first bytes of every MCAP file."""
 _BYTES: Final = "application/octet-stream"
 _JSON: Final = "application/json"
 EXPECTED: Final = "a footnav capture (.mcap, MCAP profile 'footnav')"

@@ -32,13 +32,12 @@ from dataclasses import dataclass, field
 from io import BytesIO
 from typing import IO, Any, Final
 
+from footnav.device.files.capture_schema import MCAP_MAGIC
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Header, Message, Schema
 from mcap.stream_reader import get_chunk_data_stream
 
-MCAP_MAGIC: Final = b"\x89MCAP0\r\n"
-"""The first and last bytes of an MCAP file."""
 RECORD_SIZE_LIMIT: Final = 1 << 26
 """No record footnav writes comes near this (chunks close at 256 KiB); a larger length is corruption."""
 SCAN_BLOCK: Final = 1 << 20

@@ -23,6 +23,8 @@ from typing import Any, Final
 
 from footnav.pipeline.errors import InputFormatError
 
+MCAP_MAGIC: Final = b"\x89MCAP0\r\n"
+"""The first and last bytes of every MCAP file (footnav's captures are MCAP files)."""
 FOOT_NAME: Final = re.compile(r"[A-Za-z0-9_-]{1,32}")
 """A foot (unit) name: letters, digits, ``_`` and ``-`` (``foot``, ``left``, ``right``); never a path."""
 MODES: Final = ("normal_imu", "dual_imu_raw", "raw_imu_fused", "calibration_raw_imu", "ins", "steps")
@@ -215,3 +217,13 @@ def check_session(path: Path, session: Mapping[str, str], format_version: int) -
             f"{path}: capture metadata: format_version is {_shown(version)}, expected 1 to {format_version} "
             "(a capture from a newer footnav needs that version to read it)"
         )
+
+
+def starts_like_capture(path: Path) -> bool | None:
+    """Whether the file starts with :data:`MCAP_MAGIC` (``footnav.device.files.capture`` checks the rest); None
+    when it cannot be read."""
+    try:
+        with path.open("rb") as f:
+            return f.read(len(MCAP_MAGIC)) == MCAP_MAGIC
+    except OSError:
+        return None

@@ -14,9 +14,9 @@ import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Final
 
 import numpy as np
-from footnav.device.files import vendor_log
 from footnav.pipeline.errors import InputFormatError
 from numpy.typing import NDArray
 
@@ -416,10 +416,12 @@ def _read_numeric_csv(path: Path, skip: int, ncols: int) -> F64:
 def load_mimu_log_recording(path: Path) -> Recording:
     """A raw binary log of an OpenShoe/MIMU unit's stream (``footnav.device.files.vendor_log``), at the
     rate its clock gives, with the MPU-6500 boards' profile."""
-    t_s, acc, gyr, rate_hz, notes = vendor_log.load_mimu_log(path)
+    from footnav.device.files.vendor_log import load_mimu_log  # with the protocol's decoders, for these files only
+
+    t_s, acc, gyr, rate_hz, notes = load_mimu_log(path)
     return Recording(
         name=path.stem,
-        format=vendor_log.FORMAT,
+        format=MIMU_LOG_FORMAT,
         t_s=t_s,
         acc_b_mps2=acc,
         gyr_b_radps=gyr,
@@ -429,12 +431,14 @@ def load_mimu_log_recording(path: Path) -> Recording:
     )
 
 
+MIMU_LOG_FORMAT: Final = "mimu-log"
+"""The loader key of raw logs of an OpenShoe/MIMU unit's stream (``footnav.device.files.vendor_log``)."""
 FORMAT_NAMES: Mapping[str, str] = {
     "pyshoe": "a PyShoe .mat trial",
     "xio": "an x-io CSV",
     "openshoe": "an OpenShoe inertial log",
     "csv": "a generic CSV",
-    vendor_log.FORMAT: "a raw log of an OpenShoe/MIMU unit's stream",
+    MIMU_LOG_FORMAT: "a raw log of an OpenShoe/MIMU unit's stream",
 }
 """What each format is, for messages."""
 
@@ -443,7 +447,7 @@ LOADERS: dict[str, Callable[[Path], Recording]] = {
     "xio": load_xio_csv,
     "openshoe": load_openshoe_txt,
     "csv": load_generic_csv,
-    vendor_log.FORMAT: load_mimu_log_recording,
+    MIMU_LOG_FORMAT: load_mimu_log_recording,
 }
 
 
@@ -469,8 +473,10 @@ def detect_format(path: Path) -> str:
         return "xio"
     if path.suffix.lower() == ".csv":
         return "csv"
-    if vendor_log.looks_like_log(head):
-        return vendor_log.FORMAT
+    from footnav.device.files.vendor_log import looks_like_log
+
+    if looks_like_log(head):
+        return MIMU_LOG_FORMAT
     raise InputFormatError(
         f"{path}: unknown recording format; expected a PyShoe .mat, an x-io CSV, an OpenShoe "
         "data_inert.txt, a CSV with a header row (give the columns with --columns), or a raw log of an "

@@ -33,8 +33,6 @@ from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]
 
-FORMAT: Final = "mimu-log"
-"""The loader key of these files (``footnav.device.files.recordings.LOADERS``)."""
 EXPECTED: Final = "a raw log of an OpenShoe/MIMU unit's stream (calibrated IMU 0x40 or raw IMUs 0x28)"
 MIN_PACKETS: Final = 16
 """Fewer checksum-valid packets than this are not a log."""

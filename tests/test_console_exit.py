@@ -1,0 +1,73 @@
+"""The console script's end (``footnav.app.cli.run``): after a command that writes plain files the process
+skips the interpreter's teardown, and loses nothing by it: exit handlers run, the streams are flushed, the
+exit code and the files are those of :func:`footnav.app.cli.main`."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+from footnav.app.cli import main
+
+TRIAL = Path("pyshoe-vicon") / "2017-11-27-11-12-44.mat"
+
+SCRIPT = textwrap.dedent(
+    """
+    import atexit, sys, threading
+    from footnav.app.cli import run
+
+    class Teardown:  # said only if the interpreter tears its objects down
+        def __del__(self):
+            sys.stdout.write("teardown\\n")
+
+    teardown = Teardown()
+    atexit.register(lambda: print("exit handler ran"))
+    if sys.argv[1] == "--with-thread":  # another thread alive: the interpreter ends as usual
+        threading.Thread(target=threading.Event().wait, daemon=True).start()
+        sys.argv.pop(1)
+    print("before", end="", flush=False)  # unflushed text in stdout's buffer
+    run()
+    """
+)
+
+
+def _console(tmp_path: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    script = tmp_path / "console.py"
+    script.write_text(SCRIPT, encoding="utf-8")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # stdout keeps its buffer
+    return subprocess.run(
+        [sys.executable, str(script), *args], capture_output=True, text=True, timeout=300, check=False, env=env
+    )
+
+
+def test_export_ends_without_teardown_and_loses_nothing(shared_data: Path, tmp_path: Path) -> None:
+    out = tmp_path / "console.csv"
+    proc = _console(tmp_path, "export", str(shared_data / TRIAL), "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[0].startswith("beforewrote ") and str(out) in lines[0]
+    assert lines[-1] == "exit handler ran" and "teardown" not in proc.stdout
+    reference = tmp_path / "main.csv"
+    assert main(["export", str(shared_data / TRIAL), "-o", str(reference)]) == 0
+    assert out.read_bytes() == reference.read_bytes()
+
+
+def test_a_failed_export_keeps_its_exit_code_and_message(tmp_path: Path) -> None:
+    missing = tmp_path / "missing.csv"
+    proc = _console(tmp_path, "export", str(missing), "-o", str(tmp_path / "out.csv"))
+    assert proc.returncode == 2
+    assert proc.stderr.startswith("footnav: error:") and str(missing) in proc.stderr
+    assert proc.stdout == "before" + "exit handler ran\n"
+
+
+def test_config_ends_without_teardown_unless_another_thread_runs(tmp_path: Path) -> None:
+    quick = _console(tmp_path, "config")
+    assert quick.returncode == 0, quick.stderr
+    assert quick.stdout.startswith("before") and quick.stdout.endswith("exit handler ran\n")
+    assert "teardown" not in quick.stdout
+    usual = _console(tmp_path, "--with-thread", "config")
+    assert usual.returncode == 0, usual.stderr
+    assert usual.stdout.removeprefix("before") == quick.stdout.removeprefix("before") + "teardown\n"
