@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from footnav.app.status import input_handling, lead_in_note
 from footnav.device.files.capture_schema import starts_like_capture
+from footnav.device.files.numeric_csv import build_kernel as build_reader_kernel
 from footnav.device.files.recordings import CsvMapping, Recording, load_recording
 from footnav.device.files.table_csv import build_kernel as build_csv_kernel
 from footnav.device.files.table_csv import write_table_csv
@@ -306,7 +307,7 @@ def run_export(
     ``footnav.app.api.gait_export``); returns a one-line summary (and the gait's summary line)."""
     written_as = track_format(out, out_format)  # a name that contradicts the format is refused before any work
     # on a first run the CSV writer's kernel compiles while a child compiles the filter's
-    also = build_csv_kernel if written_as == "csv" else None
+    build_writer = build_csv_kernel if written_as == "csv" else None
     if starts_like_capture(source):
         options = (("--format", fmt), ("--columns", columns), ("--profile", profile))
         given = [name for name, v in options if v] + ([] if stance_levels else ["--no-stance-levels"])
@@ -315,10 +316,10 @@ def run_export(
                 f"{source} is a footnav capture, exported with the settings it was recorded with; "
                 f"drop {', '.join(given)}"
             )
-        build_kernels(also)
+        build_kernels(build_writer)
         return export_capture(source, out, steps_out, smooth=smooth, gait_out=gait_out, out_format=out_format)
     rec = load_other_recording(source, fmt, columns)
-    build_kernels(also)
+    build_kernels(lambda: _build_csv_kernels(build_writer))
     nav, stats = navigate_recording(rec, profile, smooth, stance_levels)
     write_track(nav, out, out_format)
     # a step's covariance is the growth of the causal filter's between its epochs; the lead-in's shrinks towards
@@ -429,6 +430,14 @@ def load_other_recording(path: Path, fmt: str | None, columns: str | None) -> Re
         if "unknown recording format" not in str(exc):
             raise
         raise InputFormatError(f"{exc}; or a footnav capture (.mcap)") from None
+
+
+def _build_csv_kernels(build_writer: Callable[[], None] | None) -> None:
+    """A first run's share beside the detector's kernels: the CSV reader's (the next CSV read uses it; this one was
+    read by ``np.loadtxt``) and ``build_writer``'s."""
+    build_reader_kernel()
+    if build_writer is not None:
+        build_writer()
 
 
 def export_capture(

@@ -401,10 +401,17 @@ def _csv_header(path: Path) -> list[str]:
 
 
 def _read_numeric_csv(path: Path, skip: int, ncols: int) -> F64:
+    """The rows after ``skip`` lines, by the compiled parser (``footnav.device.files.numeric_csv``) or, for what
+    it leaves and on a first run (an empty numba cache: the command compiles the parser beside its other kernels),
+    by ``np.loadtxt``: the same values."""
+    from footnav.device.files.numeric_csv import read_plain_rows
+    from footnav.pipeline.navigation.warm import cache_is_empty
+
+    plain = None if cache_is_empty() else read_plain_rows(path.read_bytes(), skip)
     try:
         with warnings.catch_warnings():  # "no data" is reported below, as an error
             warnings.simplefilter("ignore", UserWarning)
-            data = np.loadtxt(path, delimiter=",", skiprows=skip, ndmin=2)
+            data = np.loadtxt(path, delimiter=",", skiprows=skip, ndmin=2) if plain is None else plain
     except ValueError as exc:
         raise InputFormatError(f"{path}: non-numeric values in the data rows ({exc})") from None
     if data.shape[1] < ncols or data.shape[0] < 2:
