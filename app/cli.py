@@ -423,7 +423,7 @@ def run() -> None:
     After a command that writes only plain files (:data:`PLAIN_FILE_COMMANDS`) with no other thread left, the
     process runs its exit handlers, flushes its streams and ends (``os._exit``) without the interpreter's
     teardown of numba's and LLVM's objects, which takes longer than navigating a 10-minute walk
-    (``benchmarks.startup``; design page "Start-up").
+    (``benchmarks.startup``; design page "Architecture", "A command's start and end").
     """
     argv = sys.argv[1:]
     args = _parse(argv)
