@@ -420,11 +420,13 @@ def main(argv: list[str] | None = None) -> int:
 def run() -> None:
     """Entry point of the ``footnav`` console script (and ``python -m footnav.app``): :func:`main`, then exit.
 
-    After a command that writes only plain files (:data:`PLAIN_FILE_COMMANDS`) with no other thread left, the
-    process runs its exit handlers, flushes its streams and ends (``os._exit``) without the interpreter's
-    teardown of numba's and LLVM's objects, which takes longer than navigating a 10-minute walk
-    (``benchmarks.startup``; design page "Architecture", "A command's start and end").
+    Linear algebra runs on one thread (``OPENBLAS_NUM_THREADS=1`` unless set, before numpy loads OpenBLAS; the
+    workers of ``--jobs`` inherit it). After a command that writes only plain files (:data:`PLAIN_FILE_COMMANDS`)
+    with no other thread left, the process runs its exit handlers, flushes its streams and ends (``os._exit``)
+    without the interpreter's teardown of numba's and LLVM's objects, which takes longer than navigating a
+    10-minute walk. Why: design page "Architecture", "A command's start and end".
     """
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     argv = sys.argv[1:]
     args = _parse(argv)
     code = _run_command(args, argv)

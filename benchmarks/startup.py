@@ -4,7 +4,8 @@
     .venv/bin/python -m benchmarks.startup [--repeats N] [--export-minutes M]
 
 Each figure is the median wall time of N fresh interpreters (``sys.executable -m footnav.app``, the
-console script's entry point); the ratio to ``python -c pass`` is the figure to compare across
+console script's entry point), with their median CPU time (user + system) beside it, which the shared
+machine's other load disturbs less; the ratio to ``python -c pass`` is the figure to compare across
 machines (target: at most 5x). Then ``footnav export`` of an emulated walk of M minutes at 200 Hz
 written as a generic CSV (120 000 samples by default): with the numba cache warm (target: at most 1 s
 beyond ``python -c pass``), and once in a fresh interpreter with an empty cache (the first run after
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -27,14 +29,18 @@ import numpy as np
 COMMANDS = ("demo", "live", "calibrate", "scan", "replay", "export", "evaluate", "config", "experiment")
 
 
-def median_wall_s(argv: list[str], repeats: int, env: dict[str, str] | None = None) -> float:
-    """Median wall time of ``repeats`` runs of ``argv`` (output discarded), s."""
-    times = []
+def median_times_s(argv: list[str], repeats: int, env: dict[str, str] | None = None) -> tuple[float, float]:
+    """Median wall time and median CPU time (user + system, the process and its children) of ``repeats`` runs of
+    ``argv`` (output discarded), s."""
+    walls, cpus = [], []
     for _ in range(repeats):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
         subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True, env=env)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+        walls.append(time.perf_counter() - t0)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpus.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+    return statistics.median(walls), statistics.median(cpus)
 
 
 def write_walk_csv(path: Path, minutes: float, rate_hz: float = 200.0) -> int:
@@ -50,7 +56,7 @@ def write_walk_csv(path: Path, minutes: float, rate_hz: float = 200.0) -> int:
     return len(truth)
 
 
-def export_rows(minutes: float, repeats: int, base_s: float) -> list[tuple[str, float]]:
+def export_rows(minutes: float, repeats: int) -> list[tuple[str, float, float]]:
     """``footnav export`` of a ``minutes``-long walk: warm cache (median of ``repeats``), then one run
     with an empty numba cache."""
     with tempfile.TemporaryDirectory() as work:
@@ -58,11 +64,11 @@ def export_rows(minutes: float, repeats: int, base_s: float) -> list[tuple[str, 
         n = write_walk_csv(csv, minutes)
         argv = [sys.executable, "-m", "footnav.app", "export", str(csv), "-o", str(Path(work) / "track.csv")]
         subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)  # warm the cache
-        warm = median_wall_s(argv, repeats)
+        warm = median_times_s(argv, repeats)
         cold_env = {**os.environ, "NUMBA_CACHE_DIR": str(Path(work) / "empty-cache")}
-        cold = median_wall_s(argv, 1, env=cold_env)
+        cold = median_times_s(argv, 1, env=cold_env)
     name = f"footnav export, {minutes:g} min at 200 Hz ({n} samples)"
-    return [(f"{name}, cache warm", warm), ("the same, first run (empty cache)", cold)]
+    return [(f"{name}, cache warm", *warm), ("the same, first run (empty cache)", *cold)]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -72,20 +78,23 @@ def main(argv: list[str] | None = None) -> int:
         "--export-minutes", type=float, default=10.0, help="minutes of 200 Hz walk footnav export runs on (10; 0: skip)"
     )
     args = ap.parse_args(argv)
-    base_s = median_wall_s([sys.executable, "-c", "pass"], args.repeats)
-    rows = [("python -c pass (baseline)", base_s)]
+    base_s, base_cpu_s = median_times_s([sys.executable, "-c", "pass"], args.repeats)
+    rows = [("python -c pass (baseline)", base_s, base_cpu_s)]
     footnav = [sys.executable, "-m", "footnav.app"]
-    rows.append(("footnav --help", median_wall_s([*footnav, "--help"], args.repeats)))
+    rows.append(("footnav --help", *median_times_s([*footnav, "--help"], args.repeats)))
     for command in COMMANDS:
-        rows.append((f"footnav {command} --help", median_wall_s([*footnav, command, "--help"], args.repeats)))
+        rows.append((f"footnav {command} --help", *median_times_s([*footnav, command, "--help"], args.repeats)))
     if args.export_minutes > 0:
-        rows += export_rows(args.export_minutes, max(3, args.repeats // 3), base_s)
-    print(f"  {'command':60} {'median s':>9} {'x baseline':>11}")
-    for name, wall_s in rows:
-        print(f"  {name:60} {wall_s:9.3f} {wall_s / base_s:10.1f}x")
+        rows += export_rows(args.export_minutes, max(3, args.repeats // 3))
+    print(f"  {'command':60} {'median s':>9} {'x baseline':>11} {'CPU s':>7}")
+    for name, wall_s, cpu_s in rows:
+        print(f"  {name:60} {wall_s:9.3f} {wall_s / base_s:10.1f}x {cpu_s:7.3f}")
     if args.export_minutes > 0:
-        warm, cold = rows[-2][1], rows[-1][1]
-        print(f"\n  footnav export: {warm - base_s:.2f} s beyond python -c pass with the cache warm (target 1 s);")
+        (_, warm, warm_cpu), (_, cold, _) = rows[-2:]
+        print(
+            f"\n  footnav export: {warm - base_s:.2f} s beyond python -c pass with the cache warm (target 1 s; "
+            f"CPU time {warm_cpu - base_cpu_s:.2f} s beyond);"
+        )
         print(f"  a first run {cold - warm:.1f} s more (empty numba cache: compiling its kernels; target 10 s)")
     return 0
 

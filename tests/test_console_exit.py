@@ -16,7 +16,7 @@ TRIAL = Path("pyshoe-vicon") / "2017-11-27-11-12-44.mat"
 
 SCRIPT = textwrap.dedent(
     """
-    import atexit, sys, threading
+    import atexit, os, sys, threading
     from footnav.app.cli import run
 
     class Teardown:  # said only if the interpreter tears its objects down
@@ -25,6 +25,8 @@ SCRIPT = textwrap.dedent(
 
     teardown = Teardown()
     atexit.register(lambda: print("exit handler ran"))
+    assert "numpy" not in sys.modules  # so OpenBLAS reads the thread count run() sets
+    atexit.register(lambda: print("OPENBLAS_NUM_THREADS", os.environ.get("OPENBLAS_NUM_THREADS")))
     if sys.argv[1] == "--with-thread":  # another thread alive: the interpreter ends as usual
         threading.Thread(target=threading.Event().wait, daemon=True).start()
         sys.argv.pop(1)
@@ -34,10 +36,11 @@ SCRIPT = textwrap.dedent(
 )
 
 
-def _console(tmp_path: Path, *args: str) -> subprocess.CompletedProcess[str]:
+def _console(tmp_path: Path, *args: str, **env_vars: str) -> subprocess.CompletedProcess[str]:
     script = tmp_path / "console.py"
     script.write_text(SCRIPT, encoding="utf-8")
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # stdout keeps its buffer
+    unset = ("PYTHONUNBUFFERED", "OPENBLAS_NUM_THREADS")  # stdout keeps its buffer; footnav chooses the threads
+    env = {k: v for k, v in os.environ.items() if k not in unset} | env_vars
     return subprocess.run(
         [sys.executable, str(script), *args], capture_output=True, text=True, timeout=300, check=False, env=env
     )
@@ -49,7 +52,7 @@ def test_export_ends_without_teardown_and_loses_nothing(shared_data: Path, tmp_p
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
     assert lines[0].startswith("beforewrote ") and str(out) in lines[0]
-    assert lines[-1] == "exit handler ran" and "teardown" not in proc.stdout
+    assert lines[-2:] == ["OPENBLAS_NUM_THREADS 1", "exit handler ran"] and "teardown" not in proc.stdout
     reference = tmp_path / "main.csv"
     assert main(["export", str(shared_data / TRIAL), "-o", str(reference)]) == 0
     assert out.read_bytes() == reference.read_bytes()
@@ -60,7 +63,7 @@ def test_a_failed_export_keeps_its_exit_code_and_message(tmp_path: Path) -> None
     proc = _console(tmp_path, "export", str(missing), "-o", str(tmp_path / "out.csv"))
     assert proc.returncode == 2
     assert proc.stderr.startswith("footnav: error:") and str(missing) in proc.stderr
-    assert proc.stdout == "before" + "exit handler ran\n"
+    assert proc.stdout == "before" + "OPENBLAS_NUM_THREADS 1\nexit handler ran\n"
 
 
 def test_config_ends_without_teardown_unless_another_thread_runs(tmp_path: Path) -> None:
@@ -71,3 +74,9 @@ def test_config_ends_without_teardown_unless_another_thread_runs(tmp_path: Path)
     usual = _console(tmp_path, "--with-thread", "config")
     assert usual.returncode == 0, usual.stderr
     assert usual.stdout.removeprefix("before") == quick.stdout.removeprefix("before") + "teardown\n"
+
+
+def test_a_thread_count_the_user_set_for_openblas_is_kept(tmp_path: Path) -> None:
+    proc = _console(tmp_path, "config", OPENBLAS_NUM_THREADS="2")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.endswith("OPENBLAS_NUM_THREADS 2\nexit handler ran\n")
