@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import atexit
-import contextlib
 import logging
 import math
 import os
@@ -432,9 +431,12 @@ def run() -> None:
     code = _run_command(args, argv)
     if args.command in PLAIN_FILE_COMMANDS and threading.active_count() == 1:
         atexit._run_exitfuncs()
-        for stream in (sys.stdout, sys.stderr):
-            with contextlib.suppress(OSError, ValueError):  # a closed pipe: what could be said is said
-                stream.flush()
+        try:
+            for stream in (sys.stdout, sys.stderr):
+                if stream is not None:  # None: started with that descriptor closed
+                    stream.flush()
+        except (OSError, ValueError):  # a full disk, a closed pipe: the interpreter says so and exits with 120
+            sys.exit(code)
         os._exit(code)
     sys.exit(code)
 

@@ -10,6 +10,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+import numpy as np
+import pytest
 from footnav.app.cli import main
 
 TRIAL = Path("pyshoe-vicon") / "2017-11-27-11-12-44.mat"
@@ -80,3 +82,48 @@ def test_a_thread_count_the_user_set_for_openblas_is_kept(tmp_path: Path) -> Non
     proc = _console(tmp_path, "config", OPENBLAS_NUM_THREADS="2")
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.endswith("OPENBLAS_NUM_THREADS 2\nexit handler ran\n")
+
+
+MAIN = "import sys; from footnav.app.cli import main; sys.exit(main(sys.argv[1:]))"
+
+
+def _still_walk_csv(path: Path, n: int = 2000) -> Path:
+    """``n`` samples at 200 Hz of a unit at rest, as a generic CSV."""
+    t = np.arange(n) / 200.0
+    imu = np.column_stack([t, np.zeros(n), np.zeros(n), np.full(n, 9.81), np.zeros((n, 3))])
+    np.savetxt(path, imu, delimiter=",", header="t,ax,ay,az,gx,gy,gz", comments="", fmt="%.9g")
+    return path
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full (Linux)")
+@pytest.mark.parametrize("command", ["export", "config"])
+def test_a_failed_write_to_stdout_ends_as_main_does(tmp_path: Path, command: str) -> None:
+    """stdout on a full disk: the export's one line fails when flushed at the end, config's long text while
+    printing; either way the exit code and the message are those of :func:`main`, never success."""
+    script = tmp_path / "console.py"
+    script.write_text(SCRIPT.replace('print("before", end="", flush=False)', ""), encoding="utf-8")
+    args = ["config"]
+    if command == "export":
+        args = ["export", str(_still_walk_csv(tmp_path / "walk.csv")), "-o", str(tmp_path / "track.csv")]
+    ends = []
+    for argv in ([str(script), *args], ["-c", MAIN, *args]):
+        with open("/dev/full", "w") as full:
+            proc = subprocess.run(
+                [sys.executable, *argv], stdout=full, stderr=subprocess.PIPE, text=True, timeout=300, check=False
+            )
+        ends.append((proc.returncode, "No space left on device" in proc.stderr))
+    assert ends[0] == ends[1] and ends[0][0] != 0 and ends[0][1]
+
+
+def test_a_closed_stdout_ends_as_main_does(tmp_path: Path) -> None:
+    """Started with descriptor 1 closed (``sys.stdout`` is None): the export is written and the exit code is 0."""
+    script = tmp_path / "console.py"
+    script.write_text(SCRIPT.replace('print("before", end="", flush=False)', ""), encoding="utf-8")
+    walk, track = _still_walk_csv(tmp_path / "walk.csv"), tmp_path / "track.csv"
+    proc = subprocess.run(
+        [sys.executable, str(script), "export", str(walk), "-o", str(track)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, timeout=300, check=False,
+        preexec_fn=lambda: os.close(1),
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert track.read_text().count("\n") == 1 + 2000

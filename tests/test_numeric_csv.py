@@ -89,6 +89,21 @@ def test_a_file_without_a_header_line_end_is_left_to_loadtxt() -> None:
     assert read_plain_rows(b"a,b", 1) is None
 
 
+def test_a_header_ended_by_a_lone_carriage_return_is_left_to_loadtxt(tmp_path: Path) -> None:
+    """``np.loadtxt`` of a path reads text lines, which a lone ``\\r`` ends: the first row is data there."""
+    path = tmp_path / "cr.csv"
+    path.write_bytes(b"t,a\r1,2\n3,4\n5,6\n")
+    assert read_plain_rows(path.read_bytes(), 1) is None
+    assert np.loadtxt(path, delimiter=",", skiprows=1).shape == (3, 2)
+    assert read_plain_rows(b"t,a\r\n1,2\n3,4\n", 1) is not None  # CR LF is one line end for both
+
+
+def test_more_fields_than_the_text_can_hold_are_left_to_loadtxt_without_allocating_them() -> None:
+    """A first row of 200 000 fields above 200 000 short rows: 4e10 values would need 298 GiB."""
+    data = b"a\n" + b"0" + b",0" * 200_000 + b"\n" + b"0,0\n" * 200_000
+    assert read_plain_rows(data, 1) is None
+
+
 def test_a_generic_csv_recording_loads_the_same_values(tmp_path: Path) -> None:
     rng = np.random.default_rng(3)
     n = 2000

@@ -5,9 +5,10 @@ through Python's string-to-float conversion. Here a plain number (``[+-]digits[.
 an integer ``m`` of its digits and a power of ten ``k``; when ``m < 2**53`` and ``|k| <= 22`` both are exact doubles
 and one multiplication or division rounds correctly (Clinger, "How to read floating point numbers accurately",
 PLDI 1990, the fast path), so the value is bit for bit the correctly rounded one that ``np.loadtxt`` gives. Anything
-else in the text (a comment, a blank line, spaces, quotes, ``nan``, 17 significant digits, rows of unequal length)
-makes :func:`read_plain_rows` return None, and the caller reads the file with ``np.loadtxt``, which parses it or
-says what is wrong (tests/test_numeric_csv.py compares both bit for bit).
+else in the text (a comment, a blank line, spaces, quotes, ``nan``, 17 significant digits, rows of unequal length, a
+lone ``\\r`` ending a skipped line, which ``np.loadtxt`` takes for a line end) makes :func:`read_plain_rows` return
+None, and the caller reads the file with ``np.loadtxt``, which parses it or says what is wrong
+(tests/test_numeric_csv.py compares both bit for bit).
 """
 
 from __future__ import annotations
@@ -139,12 +140,17 @@ def read_plain_rows(data: bytes, skip: int) -> NDArray[np.float64] | None:
         if ends.size == 0:
             return None
         start += int(ends[0]) + 1
+    returns = np.flatnonzero(text[:start] == 13)
+    if np.any(text[returns + 1] != 10):  # a lone \r ends a line for np.loadtxt too: lines are counted otherwise
+        return None
     first = text[start:]
     line_ends = np.flatnonzero(first == 10)
     first_row = first[: line_ends[0]] if line_ends.size else first
     if first_row.size == 0:
         return None
     cols = int(np.count_nonzero(first_row == 44)) + 1
+    if line_ends.size * cols > (first.size + 1) // 2:  # more values than the text can hold: not such rows
+        return None
     out = np.empty((line_ends.size + 1, cols))
     rows = _parse_rows(text, start, out)
     return None if rows <= 0 else out[:rows]
