@@ -90,6 +90,30 @@ def test_run_files_keeps_the_order_and_turns_errors_into_lines() -> None:
         assert results[1].error == "b: ValueError: not this one"
 
 
+class _SaysWhenTornDown:
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __del__(self) -> None:
+        self.path.write_text("torn down")
+
+
+_KEPT: list[_SaysWhenTornDown] = []
+
+
+def _keeps_an_object(path: Path) -> str:
+    """A task that leaves the worker an object, which writes ``<path>.torn`` when the interpreter tears it down."""
+    _KEPT.append(_SaysWhenTornDown(path.with_suffix(".torn")))
+    return path.name
+
+
+def test_the_pools_workers_end_without_the_interpreters_teardown(tmp_path: Path) -> None:
+    files = [tmp_path / "a", tmp_path / "b", tmp_path / "c"]
+    results = run_files(_keeps_an_object, files, 2)
+    assert [r.value for r in results] == ["a", "b", "c"]  # every result arrived
+    assert not list(tmp_path.glob("*.torn"))
+
+
 def test_two_files_of_one_name_are_refused(tmp_path: Path) -> None:
     (tmp_path / "a").mkdir()
     files = [tmp_path / "a" / "walk.mat", tmp_path / "walk.csv"]
