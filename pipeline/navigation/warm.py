@@ -92,7 +92,8 @@ def build_kernels(also: Callable[[], object] | None = None) -> None:
     _BUILT.append(True)
     if not cache_is_empty() or _cores() < 2:
         return
-    code = "from footnav.pipeline.navigation.warm import build_filter_kernels; build_filter_kernels()"
+    # the child ends without the interpreter's teardown, which this process would wait for (0.2-0.3 s)
+    code = "import os, footnav.pipeline.navigation.warm as w; w.build_filter_kernels(); os._exit(0)"
     child = subprocess.Popen(
         [sys.executable, "-c", code], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
     )
