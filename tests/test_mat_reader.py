@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import pickle
 import subprocess
 import sys
 import threading
@@ -60,3 +61,18 @@ def test_scipy_errors_come_back_as_they_were_raised(tmp_path: Path) -> None:
     with pytest.raises(Exception) as raised:  # scipy's own kind (IndexError, ValueError...)
         mat_reader.load_mat(path)
     assert not isinstance(raised.value, mat_reader.ReaderCrashedError)
+
+
+def test_the_reader_answers_every_path_and_ends_at_the_end_of_its_input(tmp_path: Path) -> None:
+    paths = [_trial(tmp_path / f"{i}.mat", n) for i, n in enumerate((400, 300))]
+    proc = subprocess.run(
+        [sys.executable, "-m", "footnav.device.files.mat_reader"],
+        input=b"".join(str(p).encode() + b"\n" for p in paths), capture_output=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    answers, rest = [], proc.stdout
+    while rest:
+        (size,) = mat_reader._HEADER.unpack(rest[: mat_reader._HEADER.size])
+        answers.append(pickle.loads(rest[mat_reader._HEADER.size : mat_reader._HEADER.size + size]))
+        rest = rest[mat_reader._HEADER.size + size :]
+    assert [(ok, value["imu"].shape) for ok, value in answers] == [(True, (400, 6)), (True, (300, 6))]

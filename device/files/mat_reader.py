@@ -11,6 +11,7 @@ caller's main script, which re-runs a script without a ``__main__`` guard (and m
 from __future__ import annotations
 
 import atexit
+import os
 import pickle
 import struct
 import subprocess
@@ -125,3 +126,4 @@ def _serve(stdin: IO[bytes], stdout: IO[bytes]) -> None:
 
 if __name__ == "__main__":
     _serve(sys.stdin.buffer, sys.stdout.buffer)
+    os._exit(0)  # every answer is flushed; the caller's exit waits for this one, not for the interpreter's teardown
