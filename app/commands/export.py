@@ -306,7 +306,8 @@ def run_export(
     and, with ``steps_out``, its steps; with ``gait_out``, its strides' gait parameters,
     ``footnav.app.api.gait_export``); returns a one-line summary (and the gait's summary line)."""
     written_as = track_format(out, out_format)  # a name that contradicts the format is refused before any work
-    # on a first run the CSV writer's kernel compiles while a child compiles the filter's
+    # on a first run the CSV kernels (the writer's, and the reader's for a recording) compile while a child compiles
+    # the filter's
     build_writer = build_csv_kernel if written_as == "csv" else None
     if starts_like_capture(source):
         options = (("--format", fmt), ("--columns", columns), ("--profile", profile))

@@ -39,12 +39,8 @@ from footnav.app.feet import (
 )
 from footnav.app.session import CalibrationLookup, run_unit_session, unit_mode
 from footnav.app.status import Progress, StatusLine, input_handling, lead_in_note
-from footnav.device.files.capture import (
-    EXPECTED,
-    MCAP_MAGIC,
-    CaptureSummary,
-    summarize_capture,
-)
+from footnav.device.files.capture import EXPECTED, CaptureSummary, summarize_capture
+from footnav.device.files.capture_schema import MCAP_MAGIC
 from footnav.device.links.replay import CaptureReplayLink
 from footnav.device.modes import Mode
 from footnav.device.protocol.raw_imu import DUAL_IMU_MASK

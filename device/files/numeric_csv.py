@@ -96,7 +96,7 @@ def _number(text, pos):  # type: ignore[no-untyped-def]
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _after(text, pos, byte):  # type: ignore[no-untyped-def]
-    """The position after ``byte`` at ``text[pos]`` (a line end: ``\n``, ``\r\n`` or the end), or -1."""
+    """The position after ``byte`` at ``text[pos]`` (a line end: ``\\n``, ``\\r\\n`` or the end), or -1."""
     n = text.shape[0]
     if byte == 10:
         if pos < n and text[pos] == 13:
@@ -134,17 +134,15 @@ def read_plain_rows(data: bytes, skip: int) -> NDArray[np.float64] | None:
     every row holds C plain decimal numbers separated by commas (``\\n`` or ``\\r\\n`` line ends); otherwise None
     (read it with ``np.loadtxt``)."""
     text = np.frombuffer(data, np.uint8)
-    start = 0
-    for _ in range(skip):
-        ends = np.flatnonzero(text[start:] == 10)
-        if ends.size == 0:
-            return None
-        start += int(ends[0]) + 1
+    all_ends = np.flatnonzero(text == 10)
+    if all_ends.size < skip:
+        return None
+    start = int(all_ends[skip - 1]) + 1 if skip else 0
     returns = np.flatnonzero(text[:start] == 13)
     if np.any(text[returns + 1] != 10):  # a lone \r ends a line for np.loadtxt too: lines are counted otherwise
         return None
+    line_ends = all_ends[skip:] - start
     first = text[start:]
-    line_ends = np.flatnonzero(first == 10)
     first_row = first[: line_ends[0]] if line_ends.size else first
     if first_row.size == 0:
         return None
