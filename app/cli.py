@@ -423,9 +423,11 @@ def run() -> None:
     workers of ``--jobs`` inherit it). After a command that writes only plain files (:data:`PLAIN_FILE_COMMANDS`)
     with no other thread left, the process runs its exit handlers, flushes its streams and ends (``os._exit``)
     without the interpreter's teardown of numba's and LLVM's objects, which takes longer than navigating a
-    10-minute walk. Why: design page "Architecture", "A command's start and end".
+    10-minute walk. Numba loads without its cffi support (``FOOTNAV_NUMBA_CFFI=0``, see
+    :mod:`footnav.pipeline.jit`). Why: design page "Architecture", "A command's start and end".
     """
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    os.environ.setdefault("FOOTNAV_NUMBA_CFFI", "0")
     argv = sys.argv[1:]
     args = _parse(argv)
     code = _run_command(args, argv)

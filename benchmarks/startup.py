@@ -9,7 +9,10 @@ machine's other load disturbs less; the ratio to ``python -c pass`` is the figur
 machines (target: at most 5x). Then ``footnav export`` of an emulated walk of M minutes at 200 Hz
 written as a generic CSV (120 000 samples by default): with the numba cache warm (target: at most 1 s
 beyond ``python -c pass``), and once in a fresh interpreter with an empty cache (the first run after
-installing: compiling its kernels, target: at most 10 s of compiling).
+installing: compiling its kernels, target: at most 10 s of compiling). Every interpreter caches
+bytecode as Python does by default, in a folder of its own (``PYTHONPYCACHEPREFIX``; a machine that sets
+``PYTHONDONTWRITEBYTECODE`` would otherwise compile footnav's sources in every run, which no installed
+copy does), and each command runs once unmeasured first.
 """
 
 from __future__ import annotations
@@ -29,9 +32,17 @@ import numpy as np
 COMMANDS = ("demo", "live", "calibrate", "scan", "replay", "export", "evaluate", "config", "experiment")
 
 
-def median_times_s(argv: list[str], repeats: int, env: dict[str, str] | None = None) -> tuple[float, float]:
+def user_env(pycache: Path) -> dict[str, str]:
+    """This process's environment with Python's default bytecode caching, into ``pycache``."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    return env | {"PYTHONPYCACHEPREFIX": str(pycache)}
+
+
+def median_times_s(argv: list[str], repeats: int, env: dict[str, str], warm_up: bool = True) -> tuple[float, float]:
     """Median wall time and median CPU time (user + system, the process and its children) of ``repeats`` runs of
-    ``argv`` (output discarded), s."""
+    ``argv`` (output discarded), after one unmeasured run if ``warm_up``, s."""
+    if warm_up:
+        subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True, env=env)
     walls, cpus = [], []
     for _ in range(repeats):
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -56,19 +67,30 @@ def write_walk_csv(path: Path, minutes: float, rate_hz: float = 200.0) -> int:
     return len(truth)
 
 
-def export_rows(minutes: float, repeats: int) -> list[tuple[str, float, float]]:
+def export_rows(minutes: float, repeats: int, env: dict[str, str]) -> list[tuple[str, float, float]]:
     """``footnav export`` of a ``minutes``-long walk: warm cache (median of ``repeats``), then one run
     with an empty numba cache."""
     with tempfile.TemporaryDirectory() as work:
         csv = Path(work) / "walk.csv"
         n = write_walk_csv(csv, minutes)
         argv = [sys.executable, "-m", "footnav.app", "export", str(csv), "-o", str(Path(work) / "track.csv")]
-        subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)  # warm the cache
-        warm = median_times_s(argv, repeats)
-        cold_env = {**os.environ, "NUMBA_CACHE_DIR": str(Path(work) / "empty-cache")}
-        cold = median_times_s(argv, 1, env=cold_env)
+        warm = median_times_s(argv, repeats, env)
+        empty_cache = str(Path(work) / "empty-cache")
+        cold = median_times_s(argv, 1, env | {"NUMBA_CACHE_DIR": empty_cache}, warm_up=False)
     name = f"footnav export, {minutes:g} min at 200 Hz ({n} samples)"
     return [(f"{name}, cache warm", *warm), ("the same, first run (empty cache)", *cold)]
+
+
+def _rows(repeats: int, export_minutes: float, env: dict[str, str]) -> list[tuple[str, float, float]]:
+    """(name, median wall s, median CPU s) of the baseline, the help of every command and the exports."""
+    rows = [("python -c pass (baseline)", *median_times_s([sys.executable, "-c", "pass"], repeats, env))]
+    footnav = [sys.executable, "-m", "footnav.app"]
+    rows.append(("footnav --help", *median_times_s([*footnav, "--help"], repeats, env)))
+    for command in COMMANDS:
+        rows.append((f"footnav {command} --help", *median_times_s([*footnav, command, "--help"], repeats, env)))
+    if export_minutes > 0:
+        rows += export_rows(export_minutes, max(3, repeats // 3), env)
+    return rows
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -78,14 +100,9 @@ def main(argv: list[str] | None = None) -> int:
         "--export-minutes", type=float, default=10.0, help="minutes of 200 Hz walk footnav export runs on (10; 0: skip)"
     )
     args = ap.parse_args(argv)
-    base_s, base_cpu_s = median_times_s([sys.executable, "-c", "pass"], args.repeats)
-    rows = [("python -c pass (baseline)", base_s, base_cpu_s)]
-    footnav = [sys.executable, "-m", "footnav.app"]
-    rows.append(("footnav --help", *median_times_s([*footnav, "--help"], args.repeats)))
-    for command in COMMANDS:
-        rows.append((f"footnav {command} --help", *median_times_s([*footnav, command, "--help"], args.repeats)))
-    if args.export_minutes > 0:
-        rows += export_rows(args.export_minutes, max(3, args.repeats // 3))
+    with tempfile.TemporaryDirectory() as pycache:
+        rows = _rows(args.repeats, args.export_minutes, user_env(Path(pycache)))
+    base_s, base_cpu_s = rows[0][1:]
     print(f"  {'command':60} {'median s':>9} {'x baseline':>11} {'CPU s':>7}")
     for name, wall_s, cpu_s in rows:
         print(f"  {name:60} {wall_s:9.3f} {wall_s / base_s:10.1f}x {cpu_s:7.3f}")

@@ -14,7 +14,7 @@ None, and the caller reads the file with ``np.loadtxt``, which parses it or says
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from footnav.pipeline.jit import njit
 from numpy.typing import NDArray
 
 _POW10 = np.array([float(10**k) for k in range(23)])

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 from footnav.pipeline.errors import FootnavError
-from numba import njit
+from footnav.pipeline.jit import njit
 from numpy.typing import NDArray
 
 _CHUNK_ROWS = 16384

@@ -36,9 +36,9 @@ import math
 from typing import NamedTuple
 
 import numpy as np
+from footnav.pipeline.jit import njit
 from footnav.pipeline.navigation.eskf import TH0, update1
 from footnav.pipeline.navigation.quaternion import vertical_in_body_s
-from numba import njit
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]

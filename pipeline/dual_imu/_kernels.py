@@ -16,9 +16,9 @@ from typing import NamedTuple
 import numpy as np
 from footnav.pipeline.dual_imu import dense_kf as kf_dense
 from footnav.pipeline.dual_imu.model import sample_ok
+from footnav.pipeline.jit import njit
 from footnav.pipeline.navigation.eskf import inject_attitude_and_reset, zupt_gate, zupt_vertical_weight
 from footnav.pipeline.navigation.quaternion import quat_from_rotvec_s, quat_mul_s, quat_to_mat_into
-from numba import njit
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]

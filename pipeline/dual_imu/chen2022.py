@@ -53,10 +53,10 @@ from footnav.pipeline.dual_imu.model import (
     sample_ok,
     still_window,
 )
+from footnav.pipeline.jit import njit
 from footnav.pipeline.navigation.alignment import align_from_still
 from footnav.pipeline.navigation.profiles import UnitProfile, get_profile
 from footnav.pipeline.navigation.quaternion import quat_from_rotvec_s, quat_mul_s, quat_to_mat_into
-from numba import njit
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]

@@ -21,8 +21,8 @@ References
 from __future__ import annotations
 
 import numpy as np
+from footnav.pipeline.jit import njit
 from footnav.pipeline.navigation.eskf import _inv3_spd
-from numba import njit
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]

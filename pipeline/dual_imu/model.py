@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from footnav.pipeline.jit import njit
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from footnav.pipeline.jit import njit
 from footnav.pipeline.navigation._kernels_linalg import (
     BA0,
     BG0,
@@ -41,7 +42,6 @@ from footnav.pipeline.navigation.params import (
     FilterParams,
 )
 from footnav.pipeline.navigation.quaternion import quat_from_rotvec_s, quat_mul_s, quat_to_mat_into, vertical_in_body_s
-from numba import njit
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]

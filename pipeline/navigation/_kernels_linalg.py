@@ -14,8 +14,8 @@ import math
 from typing import Any
 
 import numpy as np
+from footnav.pipeline.jit import njit
 from footnav.pipeline.navigation.quaternion import quat_from_rotvec_s, quat_mul_s
-from numba import njit
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]

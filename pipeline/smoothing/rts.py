@@ -36,6 +36,7 @@ import bisect
 import math
 
 import numpy as np
+from footnav.pipeline.jit import njit
 from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.navigation import eskf
 from footnav.pipeline.navigation._kernels import _correct, _predict, track_stance
@@ -57,7 +58,6 @@ from footnav.pipeline.navigation.params import FilterParams
 from footnav.pipeline.navigation.quaternion import quat_from_rotvec_s, quat_mul_s
 from footnav.pipeline.samples import ImuBatch
 from footnav.pipeline.stance.levels import StanceLevelParams, StanceLevels, height_update
-from numba import njit
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]

@@ -30,8 +30,8 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+from footnav.pipeline.jit import njit
 from footnav.pipeline.navigation._kernels_linalg import INTERNAL
-from numba import njit
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]

@@ -35,9 +35,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from footnav.pipeline.jit import njit
 from footnav.pipeline.navigation.eskf import N_STATE, P0, clone_height, update1
 from footnav.pipeline.stance.detectors import carried_runs
-from numba import njit
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]
