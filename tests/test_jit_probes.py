@@ -69,3 +69,68 @@ def test_cffi_support_is_left_out_only_when_asked() -> None:
     env = os.environ | {"FOOTNAV_NUMBA_CFFI": "0"}
     out = subprocess.run([sys.executable, *check], capture_output=True, text=True, timeout=300, env=env, check=True)
     assert out.stdout.strip() == "4"  # cffi itself still imports and works
+
+
+RACE = textwrap.dedent(
+    """
+    import sys, threading, time
+    delay_s = float(sys.argv[1])
+    result = {}
+
+    def footnav():
+        import footnav.pipeline.jit
+        result["footnav"] = "ok"
+
+    def scipy():  # another thread importing SciPy while footnav's first import loads numba
+        time.sleep(delay_s)
+        try:
+            import scipy.optimize
+            result["scipy"] = "ok"
+        except Exception as exc:
+            result["scipy"] = repr(exc)
+
+    threads = [threading.Thread(target=footnav), threading.Thread(target=scipy)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    print(result["footnav"], result["scipy"])
+    """
+)
+
+
+@pytest.mark.parametrize("delay_s", [0.0, 0.02, 0.05, 0.1])
+def test_other_threads_import_scipy_meanwhile(delay_s: float) -> None:
+    env = os.environ | {"FOOTNAV_NUMBA_CFFI": "0"}
+    proc = subprocess.run(
+        [sys.executable, "-c", RACE, str(delay_s)], capture_output=True, text=True, timeout=300, env=env, check=False
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["ok", "ok"]
+
+
+def test_cffi_is_hidden_from_the_loading_thread_only() -> None:
+    import threading
+
+    from footnav.pipeline.jit import _HiddenFromThisThread
+
+    sys.modules.pop("hidden_probe_module", None)
+    hidden = _HiddenFromThisThread("hidden_probe_module")
+    sys.meta_path.insert(0, hidden)
+    try:
+        with pytest.raises(ImportError, match="left out while numba loads"):
+            __import__("hidden_probe_module")
+        seen: list[str] = []
+
+        def other_thread() -> None:  # reaches the usual finders: the module does not exist
+            try:
+                __import__("hidden_probe_module")
+            except ModuleNotFoundError as exc:
+                seen.append(type(exc).__name__)
+
+        thread = threading.Thread(target=other_thread)
+        thread.start()
+        thread.join()
+        assert seen == ["ModuleNotFoundError"]
+    finally:
+        sys.meta_path.remove(hidden)
