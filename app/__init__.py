@@ -1,11 +1,13 @@
 """The command line, configuration and session assembly: :func:`main` is ``footnav``; and the Python API
-(``footnav.app.api``): :func:`navigate`, :func:`read_recording`, :func:`gait_parameters`, :func:`batch`."""
+(``footnav.app.api``): :func:`navigate`, :func:`read_recording`, :func:`gait_parameters`, :func:`batch`, and
+:func:`navigate_pair` for a left and a right foot."""
 
 from typing import TYPE_CHECKING
 
 from footnav.pipeline._lazy import lazy_exports
 
 if TYPE_CHECKING:
+    from .api.feet import navigate_pair as navigate_pair
     from .api.folders import batch as batch
     from .api.navigation import Navigation as Navigation
     from .api.navigation import gait_parameters as gait_parameters

@@ -122,8 +122,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     for problem in problems:
         print(f"footnav: skipped: {problem}", file=sys.stderr)
     if not rows:
-        files = "the recording" if len(problems) == 1 else f"none of the {len(problems)} recordings"
-        raise FootnavError(f"nothing evaluated: {files} could be measured (the lines above say why)")
+        files = "the recording could not" if len(problems) == 1 else f"none of the {len(problems)} recordings could"
+        raise FootnavError(f"nothing evaluated: {files} be measured (the lines above say why)")
     return 2 if problems else 0
 
 
@@ -131,7 +131,8 @@ def _evaluate_feet(args: argparse.Namespace) -> int:
     from footnav.app.commands.evaluate import evaluate_pair, format_table, pair_summary
 
     if not (args.left and args.right) or args.paths:
-        raise FootnavError("two feet are evaluated as --left FILE --right FILE, without other recordings")
+        missing = "" if args.left and args.right else f" (--{'right' if args.left else 'left'} is missing)"
+        raise FootnavError(f"two feet are evaluated as --left FILE --right FILE, without other recordings{missing}")
     if args.smooth:
         raise FootnavError("--smooth applies to one foot's recording; two feet are evaluated with the causal filter")
     if args.jobs is not None or args.scheduler:

@@ -181,7 +181,9 @@ def _add_lever_arm_arg(p: argparse.ArgumentParser) -> None:
 
 def _add_output_args(p: argparse.ArgumentParser, *, capture: bool) -> None:
     p.add_argument("--save", type=Path, metavar="FILE.rrd", help="also write the recording to this file")
-    p.add_argument("--no-viewer", action="store_true", help="do not open a viewer (save only)")
+    p.add_argument(
+        "--no-viewer", action="store_true", help="no viewer: Rerun output goes to the --save file only, or nowhere"
+    )
     p.add_argument("--web", action="store_true", help="serve the web viewer on 127.0.0.1 and print its URL")
     p.add_argument(
         "--keep-web",
@@ -487,7 +489,9 @@ def _add_export_command(sub: Commands) -> None:
     )
     _add_recording_args(export)
     _add_jobs_arg(export)
-    feet = _add_feet_coupling_args(export, default="coupled; on one clock, to TRACK-left.csv, TRACK-right.csv")
+    feet = _add_feet_coupling_args(
+        export, default="coupled; on one clock, to TRACK-left.csv, TRACK-right.csv, each in its own foot's frame"
+    )
     feet.add_argument("--left", type=Path, metavar="FILE", help="the left foot's recording (with --right)")
     feet.add_argument("--right", type=Path, metavar="FILE", help="the right foot's recording (with --left)")
 
@@ -523,7 +527,9 @@ def _add_evaluate_command(sub: Commands) -> None:
     evaluate.add_argument("paths", type=Path, nargs="*", metavar="PATH", help="recordings, or folders of them")
     _add_smooth_arg(evaluate)
     _add_levels_arg(evaluate)
-    feet = evaluate.add_argument_group("two feet", "a left and a right recording on one clock, navigated together")
+    feet = evaluate.add_argument_group(
+        "two feet", "a left and a right recording on one clock, navigated together by the causal filter (no --smooth)"
+    )
     feet.add_argument("--left", type=Path, metavar="FILE", help="the left foot's recording (with --right)")
     feet.add_argument("--right", type=Path, metavar="FILE", help="the right foot's recording (with --left)")
     feet.add_argument(

@@ -176,10 +176,19 @@ def test_a_tof_capture_is_not_smoothed(tmp_path: Path) -> None:
 
 def test_evaluate_says_a_capture_has_no_ground_truth(capture: Path) -> None:
     proc = _footnav("evaluate", str(capture))
-    _assert_one_line_error(proc, "nothing evaluated")
+    _assert_one_line_error(proc, "nothing evaluated: the recording could not be measured")
     assert "is a footnav capture: it records no ground truth" in proc.stderr
     assert "unknown recording format" not in proc.stderr
     assert proc.stdout == ""  # no empty table
+    proc = _footnav("evaluate", "--left", str(capture), "--right", str(capture))  # as a pair: the same reason
+    _assert_one_line_error(proc, f"{capture} is a footnav capture: it records no ground truth")
+    assert proc.stdout == ""
+
+
+def test_evaluate_names_the_missing_foot(capture: Path) -> None:
+    proc = _footnav("evaluate", "--left", str(capture))
+    _assert_one_line_error(proc, "two feet are evaluated as --left FILE --right FILE")
+    assert "(--right is missing)" in proc.stderr
 
 
 def test_evaluate_with_every_file_skipped_says_so(tmp_path: Path) -> None:

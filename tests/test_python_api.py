@@ -116,11 +116,15 @@ def _python_blocks(markdown: str) -> list[str]:
     return re.findall(r"^```python\n(.*?)^```$", markdown, flags=re.MULTILINE | re.DOTALL)
 
 
-def test_the_user_guide_example_runs_as_written(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_user_guide_example_runs_as_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     """docs/guide/python-api.md, its ``python`` blocks run in order in one namespace, as a notebook runs
-    them: the API, the gait parameters and the plot (a Rerun recording)."""
-    blocks = _python_blocks(GUIDE.read_text(encoding="utf-8"))
-    assert len(blocks) >= 6
+    them: the API, the gait parameters, the plot (a Rerun recording) and two feet, whose printed errors
+    are the page's."""
+    guide = GUIDE.read_text(encoding="utf-8")
+    blocks = _python_blocks(guide)
+    assert len(blocks) >= 9
     monkeypatch.chdir(tmp_path)
     namespace: dict[str, object] = {"__name__": "__guide__"}
     for k, block in enumerate(blocks):
@@ -133,6 +137,10 @@ def test_the_user_guide_example_runs_as_written(tmp_path: Path, monkeypatch: pyt
     result = namespace["result"]
     end_error = np.linalg.norm(result.pos_n_m[-1] - truth.pos_n_m[-1])  # type: ignore[attr-defined]
     assert end_error < 0.05
+    pair_error_m = namespace["pair_error_m"]
+    assert np.mean(pair_error_m["coupled"]) < np.mean(pair_error_m["independent"])  # type: ignore[index]
+    shown = re.search(r"^```text\n(coupled .*?)^```$", guide, flags=re.MULTILINE | re.DOTALL)
+    assert shown is not None and shown.group(1) in capsys.readouterr().out
 
 
 def test_the_api_is_importable_from_an_installed_footnav_without_numerics() -> None:

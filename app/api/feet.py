@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 from footnav.app.commands.export import (
     foot_path,
     load_other_recording,
@@ -24,13 +25,13 @@ from footnav.app.commands.export import (
 )
 from footnav.device.files.recordings import Recording
 from footnav.pipeline.errors import FootnavError
-from footnav.pipeline.navigation.saturation import reconstruct_saturated_rates
+from footnav.pipeline.navigation.saturation import SaturatedRates, reconstruct_saturated_rates
 from footnav.pipeline.two_feet import FootSeparation, FootSignals, TwoFeetResult, navigate_feet
 
 
-def _signals(rec: Recording) -> FootSignals:
+def _signals(rec: Recording) -> tuple[FootSignals, SaturatedRates]:
     sat = reconstruct_saturated_rates(rec.t_s, rec.gyr_b_radps)
-    return FootSignals(rec.t_start_s + rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, sat.clipped_b)
+    return FootSignals(rec.t_start_s + rec.t_s, rec.acc_b_mps2, sat.gyr_b_radps, rec.rate_hz, sat.clipped_b), sat
 
 
 def navigate_pair(
@@ -69,7 +70,7 @@ def navigate_pair(
     FootnavError
         the recordings do not overlap in time, or a foot never stands still.
     """
-    sl, sr = _signals(left), _signals(right)
+    (sl, sat_l), (sr, sat_r) = _signals(left), _signals(right)
     overlap_s = min(sl.t_s[-1], sr.t_s[-1]) - max(sl.t_s[0], sr.t_s[0])
     if not overlap_s > 0.0:
         raise FootnavError(
@@ -80,9 +81,13 @@ def navigate_pair(
     left_config = recording_config(left, profile, stance_levels=stance_levels)
     right_config = recording_config(right, profile, stance_levels=stance_levels)
     result = navigate_feet(sl, sr, left_config, coupling, right_config=right_config)
-    for rec, nav in ((left, result.left), (right, result.right)):
+    for rec, nav, stats, sat in (
+        (left, result.left, result.left_stats, sat_l),
+        (right, result.right, result.right_stats, sat_r),
+    ):
         if nav is None:
             raise FootnavError(f"{rec.name}: the unit is never still, so roll and pitch cannot be aligned")
+        stats.rates_reconstructed, stats.rates_clipped = sat.reconstructed, int(np.count_nonzero(sat.clipped_b))
     return result
 
 
@@ -139,9 +144,12 @@ def export_pair(
             from footnav.app.api.gait_export import export_gait
 
             gait.append(export_gait(nav, foot_path(gait_out, foot), causal_from=0, label=f" {foot}"))
-    how = "independent"
-    if bound is not None:  # as the live sessions' FeetLockstep.summary says it
-        how = f"coupled: {len(result.corrections)} corrections of the distance bound" + (
-            "" if bound.heading is None else f", {len(result.heading_updates)} relative heading updates"
-        )
+    how = f"coupled: {coupling_counts(result, bound)}" if bound is not None else "independent"
     return f"wrote {'; '.join(written)} (two feet, {how})" + "".join(f"\n{g}" for g in gait)
+
+
+def coupling_counts(result: TwoFeetResult, bound: FootSeparation) -> str:
+    """What the coupling did, as the live sessions' ``FeetLockstep.summary`` says it: the distance bound's
+    corrections and, when ``bound`` has the relative heading, its updates."""
+    heading = "" if bound.heading is None else f", {len(result.heading_updates)} relative heading updates"
+    return f"{len(result.corrections)} corrections of the distance bound{heading}"

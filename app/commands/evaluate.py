@@ -7,6 +7,7 @@ errors also as a percentage of the distance walked. One default configuration fo
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -49,6 +50,8 @@ class Evaluation:
     """What was done with doubtful input (``footnav.app.status.input_handling``; empty: nothing)."""
     feet: str = ""
     """Of a pair of feet (:func:`evaluate_pair`): ``"coupled"`` or ``"independent"``; empty for one foot."""
+    coupling: str = ""
+    """Of a coupled pair: what the coupling did (``footnav.app.api.feet.coupling_counts``)."""
 
     @property
     def end_point_pct(self) -> float:
@@ -69,12 +72,7 @@ def evaluate_file(path: Path, smooth: str | None = None, stance_levels: bool = T
         the file is not a recording footnav reads, has no ground truth and is not a known closed loop
         (a footnav capture among them), or never stands still.
     """
-    if starts_like_capture(path):
-        raise FootnavError(
-            f"{path} is a footnav capture: it records no ground truth and no known closed loop, so there is "
-            "nothing to measure it against (`footnav export` writes its track, `footnav replay` shows it)"
-        )
-    rec = _measurable(load_recording(path), path)
+    rec = _measurable(path)
     nav, stats = navigate_recording(rec, smooth=smooth, stance_levels=stance_levels)
     # scored from the first still period, where the track's frame is defined, as before the samples before it were
     # navigated (backwards from it, ``footnav.pipeline.navigation.lead_in``): the figures stay comparable
@@ -136,20 +134,22 @@ def evaluate_pair(
     FootnavError
         a file cannot be read or measured, or the two do not overlap in time.
     """
-    from footnav.app.api.feet import navigate_pair
+    from footnav.app.api.feet import coupling_counts, navigate_pair
     from footnav.pipeline.two_feet.live import coupling_bound
 
-    recs = [_measurable(load_recording(p), p) for p in (left, right)]
+    recs = [_measurable(p) for p in (left, right)]
     rows: list[Evaluation] = []
     bound = coupling_bound("distance+heading" if heading else "distance")
     for coupled in (False,) if independent_only else (True, False):
         result = navigate_pair(recs[0], recs[1], coupled=coupled, bound=bound, stance_levels=stance_levels)
         how = "coupled" if coupled else "independent"
+        counts = coupling_counts(result, bound) if bound is not None and coupled else ""
         feet = ((result.left, result.left_stats), (result.right, result.right_stats))
         for side, rec, (nav, stats) in zip(("L", "R"), recs, feet, strict=True):
             assert nav is not None  # navigate_pair raises otherwise
             name = f"{side} {how} {rec.name}"
-            rows.append(score(rec, nav.pos_n_m, stats.samples_before_alignment, name=name, samples=len(nav), feet=how))
+            row = score(rec, nav.pos_n_m, stats.samples_before_alignment, name=name, samples=len(nav), feet=how)
+            rows.append(dataclasses.replace(row, handling=input_handling(stats), coupling=counts))
     return rows
 
 
@@ -166,14 +166,22 @@ def pair_summary(rows: list[Evaluation]) -> str:
         means[how] = float(np.mean(err))
         end = float(np.mean([r.end_point_m for r in feet]))
         what = "ATE-2D" if not math.isnan(feet[0].ate_2d_m) else "loop closure 2D"
-        lines.append(f"two feet {how + ':':<13} mean {what} {means[how]:.3f} m, end point {end:.3f} m")
+        counts = f" ({feet[0].coupling})" if feet[0].coupling else ""
+        lines.append(f"two feet {how + ':':<13} mean {what} {means[how]:.3f} m, end point {end:.3f} m{counts}")
     if len(means) == 2:
         change = 100.0 * (means["coupled"] / means["independent"] - 1.0)
-        lines.append(f"coupled against independent: {change:+.1f} %")
+        lines.append(f"coupled against independent: {change:+.1f} % mean {what}")
     return "\n".join(lines)
 
 
-def _measurable(rec: Recording, path: Path) -> Recording:
+def _measurable(path: Path) -> Recording:
+    """The recording at ``path``, refused when there is nothing to measure it against."""
+    if starts_like_capture(path):
+        raise FootnavError(
+            f"{path} is a footnav capture: it records no ground truth and no known closed loop, so there is "
+            "nothing to measure it against (`footnav export` writes its track, `footnav replay` shows it)"
+        )
+    rec = load_recording(path)
     if rec.gt_pos_m is None and not rec.closed_loop:
         raise FootnavError(f"{path}: no ground truth and not a known closed loop; nothing to measure against")
     return rec
