@@ -450,7 +450,8 @@ async def run_unit_session(
     def idle(seconds: float) -> None:
         if link is not None and link.health.gaps and link.health.gaps[-1].end_ns is None:
             return  # the link reports its own gaps (stall, disconnect, reconnect)
-        log.warning("no data from %s for %.1f s", name, seconds)
+        who = f"the {status.name} foot's unit ({name})" if isinstance(status, FootStatus) else name
+        log.warning("no data from %s for %.1f s", who, seconds)
 
     if isinstance(status, FootStatus):
         status.clock_rate_hz = lambda: result.clock_rate_hz

@@ -52,6 +52,11 @@ class FootStatus:
         the time, the stance and the rate stay those of the latest samples."""
         self.distance_m += float(np.linalg.norm(np.diff(nav.pos_n_m, axis=0), axis=1).sum())
 
+    def phase(self) -> str:
+        """``stance`` or ``swing``, of the latest estimate; ``aligning`` before the first (the navigator
+        waits for the unit's first still period)."""
+        return "aligning" if not self.samples else ("stance" if self.stance else "swing ")
+
     def rate_hz(self) -> float:
         """Samples per second of wall time over the last :data:`RATE_WINDOW_S` or so."""
         now = time.monotonic()
@@ -70,10 +75,7 @@ class FootStatus:
         name = f"{self.name}: " if with_name else ""
         clock = None if self.clock_rate_hz is None else self.clock_rate_hz()
         clock_text = "" if clock is None else f"clock {clock:g} Hz, "
-        return (
-            f"{name}{clock_text}{self.rate_hz():5.0f}/s lost {lost}{extra} "
-            f"{'stance' if self.stance else 'swing '} {self.distance_m:7.2f} m"
-        )
+        return f"{name}{clock_text}{self.rate_hz():5.0f}/s lost {lost}{extra} {self.phase()} {self.distance_m:7.2f} m"
 
 
 class StatusLine:

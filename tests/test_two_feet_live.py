@@ -341,7 +341,7 @@ def test_independent_feet_are_each_foots_own_navigation(
     tmp_path: Path, coupled_demo: tuple[Path, dict[str, NavBatch], str, Path]
 ) -> None:
     capture, live, printed = _demo(tmp_path, "independent")
-    assert "feet coupled" not in printed
+    assert "feet coupled" not in printed and "feet independent: each foot navigated on its own" in printed
     cfg, samples, rates = _samples(capture)
     for foot in ("left", "right"):
         alone = Navigator(cfg.nav_config(), rates[foot]).process(samples[foot])
