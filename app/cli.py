@@ -109,14 +109,15 @@ def _report_batch(lines: list[str], failures: list[str], done: str) -> int:
 
 def _evaluate(args: argparse.Namespace) -> int:
     from footnav.app.commands.batch import scheduler_client
-    from footnav.app.commands.evaluate import format_table, run_evaluate
+    from footnav.app.commands.evaluate import Reading, format_table, run_evaluate
 
     if args.left or args.right or args.independent_feet or args.distance_only:
         return _evaluate_feet(args)
     if not args.paths:
         raise FootnavError("evaluate needs recordings (PATH ...), or a pair of them: --left FILE --right FILE")
     with scheduler_client(args.scheduler) as client:
-        rows, problems = run_evaluate(args.paths, args.smooth, args.stance_levels, args.jobs, client)
+        reading = Reading(args.format, args.columns, args.profile)
+        rows, problems = run_evaluate(args.paths, args.smooth, args.stance_levels, args.jobs, client, reading)
     if rows:
         print(format_table(rows))
     for problem in problems:
@@ -128,7 +129,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _evaluate_feet(args: argparse.Namespace) -> int:
-    from footnav.app.commands.evaluate import evaluate_pair, format_table, pair_summary
+    from footnav.app.commands.evaluate import Reading, evaluate_pair, format_table, pair_summary
 
     if not (args.left and args.right) or args.paths:
         missing = "" if args.left and args.right else f" (--{'right' if args.left else 'left'} is missing)"
@@ -145,6 +146,7 @@ def _evaluate_feet(args: argparse.Namespace) -> int:
         independent_only=args.independent_feet,
         heading=not args.distance_only,
         stance_levels=args.stance_levels,
+        reading=Reading(args.format, args.columns, args.profile),
     )
     print(format_table(rows))
     print(pair_summary(rows))

@@ -525,6 +525,7 @@ def _positive_int(text: str) -> int:
 def _add_evaluate_command(sub: Commands) -> None:
     evaluate = sub.add_parser("evaluate", help="accuracy on recordings with ground truth or a closed loop")
     evaluate.add_argument("paths", type=Path, nargs="*", metavar="PATH", help="recordings, or folders of them")
+    _add_reading_args(evaluate)
     _add_smooth_arg(evaluate)
     _add_levels_arg(evaluate)
     feet = evaluate.add_argument_group(
@@ -565,6 +566,12 @@ def _add_config_command(sub: Commands) -> None:
 
 
 def _add_recording_args(parser: argparse.ArgumentParser) -> None:
+    _add_reading_args(parser)
+    _add_smooth_arg(parser)
+    _add_levels_arg(parser)
+
+
+def _add_reading_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--format", choices=RECORDING_FORMATS, help="recording format (default: detected from the file)"
     )
@@ -572,11 +579,9 @@ def _add_recording_args(parser: argparse.ArgumentParser) -> None:
         "--columns",
         metavar="SPEC",
         help="for a generic CSV: time=COL[:s|ms|us|ns],acc=X;Y;Z[:m/s2|g|mg],gyr=X;Y;Z[:rad/s|mrad/s|deg/s],"
-        "profile=NAME",
+        "gt=X;Y;Z,profile=NAME",
     )
     parser.add_argument("--profile", choices=PROFILES, help="unit profile (default: the format's sensor)")
-    _add_smooth_arg(parser)
-    _add_levels_arg(parser)
 
 
 def _add_smooth_arg(parser: argparse.ArgumentParser) -> None:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from footnav.app.api.feet import navigate_pair
 from footnav.app.cli import main
-from footnav.app.commands.evaluate import evaluate_file, evaluate_pair
+from footnav.app.commands.evaluate import Reading, evaluate_file, evaluate_pair
 from footnav.device.emulator.motion.gait import GaitTruth, two_feet_walks
 from footnav.device.emulator.sensors.imu_errors import IMU_GRADES, corrupt
 from footnav.device.files.recordings import load_recording
@@ -137,3 +137,25 @@ def test_cli_refuses_half_a_pair_and_files_that_do_not_overlap(
     np.savetxt(later, rows, fmt="%.10g", delimiter=",", header=text[0], comments="")
     assert main(["evaluate", "--left", str(pair[0]), "--right", str(later)]) != 0
     assert "do not overlap in time" in capsys.readouterr().err
+
+
+def test_columns_and_profile_are_read_as_export_reads_them(
+    pair: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``evaluate --columns/--profile``: another tool's names and units (time in ms, acceleration in g, the ground
+    truth as X;Y;Z) give the figures of the file in footnav's names; the profile reaches each foot's navigator."""
+    table = np.loadtxt(pair[0], delimiter=",", skiprows=1)
+    table[:, 0] *= 1000.0
+    table[:, 1:4] /= 9.80665
+    renamed = tmp_path / "other-tool.csv"
+    np.savetxt(renamed, table, fmt="%.10g", delimiter=",", header="ms,a1,a2,a3,w1,w2,w3,X,Y,Z", comments="")
+    spec = "time=ms:ms,acc=a1;a2;a3:g,gyr=w1;w2;w3,gt=X;Y;Z"
+    assert main(["evaluate", str(renamed)]) == 2  # footnav's own names are not there
+    capsys.readouterr()
+    assert main(["evaluate", str(renamed), "--columns", spec]) == 0
+    row = capsys.readouterr().out.splitlines()[2].split()
+    reference = evaluate_file(pair[0])
+    assert float(row[4]) == pytest.approx(reference.ate_2d_m, abs=1e-3)
+    generic, mpu = (evaluate_pair(*pair, reading=Reading(profile=p)) for p in ("generic", "mpu6500x4"))
+    assert [r.ate_2d_m for r in generic] == [r.ate_2d_m for r in evaluate_pair(*pair)]  # a CSV's default profile
+    assert all(g.ate_2d_m != m.ate_2d_m for g, m in zip(generic, mpu, strict=True))

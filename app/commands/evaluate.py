@@ -19,7 +19,7 @@ import numpy as np
 from footnav.app.commands.export import lead_in_note, navigate_recording
 from footnav.app.status import input_handling
 from footnav.device.files.capture_schema import starts_like_capture
-from footnav.device.files.recordings import Recording, detect_format, load_recording
+from footnav.device.files.recordings import CsvMapping, Recording, detect_format, load_recording
 from footnav.pipeline.errors import FootnavError
 from footnav.pipeline.metrics import armse_2d_pyshoe, ate, loop_closure_error, path_length_m
 from numpy.typing import NDArray
@@ -62,7 +62,19 @@ class Evaluation:
         return 100.0 * self.loop_3d_m / self.distance_m
 
 
-def evaluate_file(path: Path, smooth: str | None = None, stance_levels: bool = True) -> Evaluation:
+@dataclass(frozen=True)
+class Reading:
+    """How to read the recordings: ``--format``, ``--columns`` and ``--profile`` as ``export`` takes them (None:
+    detected from the file, the default columns, the format's unit profile)."""
+
+    format: str | None = None
+    columns: str | None = None
+    profile: str | None = None
+
+
+def evaluate_file(
+    path: Path, smooth: str | None = None, stance_levels: bool = True, reading: Reading = Reading()
+) -> Evaluation:
     """Navigate one recording (smoothed when ``smooth`` is one of ``footnav.app.commands.export.SMOOTHING``) and measure
     it (with the stance height levels unless told not to).
 
@@ -72,8 +84,8 @@ def evaluate_file(path: Path, smooth: str | None = None, stance_levels: bool = T
         the file is not a recording footnav reads, has no ground truth and is not a known closed loop
         (a footnav capture among them), or never stands still.
     """
-    rec = _measurable(path)
-    nav, stats = navigate_recording(rec, smooth=smooth, stance_levels=stance_levels)
+    rec = _measurable(path, reading)
+    nav, stats = navigate_recording(rec, reading.profile, smooth, stance_levels)
     # scored from the first still period, where the track's frame is defined, as before the samples before it were
     # navigated (backwards from it, ``footnav.pipeline.navigation.lead_in``): the figures stay comparable
     lead_in = f"{note} (not scored)" if (note := lead_in_note(stats).removeprefix(", ")) else ""
@@ -122,7 +134,13 @@ def score(
 
 
 def evaluate_pair(
-    left: Path, right: Path, *, independent_only: bool = False, heading: bool = True, stance_levels: bool = True
+    left: Path,
+    right: Path,
+    *,
+    independent_only: bool = False,
+    heading: bool = True,
+    stance_levels: bool = True,
+    reading: Reading = Reading(),
 ) -> list[Evaluation]:
     """A left and a right recording navigated together (``footnav.app.api.feet.navigate_pair``), each foot
     measured as :func:`evaluate_file` measures one: coupled by the inter-foot distance bound (and, when
@@ -137,11 +155,13 @@ def evaluate_pair(
     from footnav.app.api.feet import coupling_counts, navigate_pair
     from footnav.pipeline.two_feet.live import coupling_bound
 
-    recs = [_measurable(p) for p in (left, right)]
+    recs = [_measurable(p, reading) for p in (left, right)]
     rows: list[Evaluation] = []
     bound = coupling_bound("distance+heading" if heading else "distance")
     for coupled in (False,) if independent_only else (True, False):
-        result = navigate_pair(recs[0], recs[1], coupled=coupled, bound=bound, stance_levels=stance_levels)
+        result = navigate_pair(
+            recs[0], recs[1], coupled=coupled, bound=bound, stance_levels=stance_levels, profile=reading.profile
+        )
         how = "coupled" if coupled else "independent"
         counts = coupling_counts(result, bound) if bound is not None and coupled else ""
         feet = ((result.left, result.left_stats), (result.right, result.right_stats))
@@ -174,14 +194,14 @@ def pair_summary(rows: list[Evaluation]) -> str:
     return "\n".join(lines)
 
 
-def _measurable(path: Path) -> Recording:
-    """The recording at ``path``, refused when there is nothing to measure it against."""
+def _measurable(path: Path, reading: Reading) -> Recording:
+    """The recording at ``path``, read as ``reading`` says, refused when there is nothing to measure it against."""
     if starts_like_capture(path):
         raise FootnavError(
             f"{path} is a footnav capture: it records no ground truth and no known closed loop, so there is "
             "nothing to measure it against (`footnav export` writes its track, `footnav replay` shows it)"
         )
-    rec = load_recording(path)
+    rec = load_recording(path, reading.format, CsvMapping.parse(reading.columns) if reading.columns else None)
     if rec.gt_pos_m is None and not rec.closed_loop:
         raise FootnavError(f"{path}: no ground truth and not a known closed loop; nothing to measure against")
     return rec
@@ -249,6 +269,7 @@ def evaluate_files(
     stance_levels: bool = True,
     jobs: int | None = 1,
     client: Client | None = None,
+    reading: Reading = Reading(),
 ) -> list[FileResult[Evaluation]]:
     """Evaluate every recording found, on ``jobs`` processes (None: one per core) or on ``client``'s Dask cluster
     (``footnav.app.commands.batch.run_files``); each file's :class:`Evaluation` or failure, in the order of the files.
@@ -263,7 +284,7 @@ def evaluate_files(
     files = find_recordings(paths)
     if not files:
         raise FootnavError("no recordings found in " + ", ".join(str(p) for p in paths))
-    task = partial(evaluate_file, smooth=smooth, stance_levels=stance_levels)
+    task = partial(evaluate_file, smooth=smooth, stance_levels=stance_levels, reading=reading)
     return run_files(task, files, jobs, "evaluate", client=client)
 
 
@@ -273,7 +294,8 @@ def run_evaluate(
     stance_levels: bool = True,
     jobs: int | None = 1,
     client: Client | None = None,
+    reading: Reading = Reading(),
 ) -> tuple[list[Evaluation], list[str]]:
     """:func:`evaluate_files`, as the rows and one-line problems (files that failed), in the order of the files."""
-    results = evaluate_files(paths, smooth, stance_levels, jobs, client)
+    results = evaluate_files(paths, smooth, stance_levels, jobs, client, reading)
     return [r.value for r in results if r.value is not None], [r.error for r in results if r.error]
