@@ -17,9 +17,10 @@ both (those σ, drifts and band). Printed per walk: each foot's final and mean-a
 error, independent and coupled (the first variant and R), and the change of the two feet's mean error in
 %; then per axis errors, course (and all courses) and variant the mean over the walks, its change, the
 worst change of one walk, the noise (the SD over the seeds of the independent error: what changing the
-IMU's error draw alone does), how many walks got worse by more than 1 cm, and the runtime ratio coupled
-/ independent. Beside the variants, the ceiling of any relative constraint: the independent feet's
-error vectors averaged sample by sample (``averaged_error``).
+IMU's error draw alone does), how many walks got worse by more than 1 cm, the runtime ratio coupled
+/ independent, and the mean of the two feet's final error with its change. Beside the variants, the
+ceiling of any relative constraint: the independent feet's error vectors averaged sample by sample
+(``averaged_error``).
 """
 
 from __future__ import annotations
@@ -58,16 +59,19 @@ def horizontal_errors(nav: NavBatch | None, truth: GaitTruth) -> tuple[float, fl
     return float(e[-1]), float(e.mean())
 
 
-def averaged_error(res: TwoFeetResult, left: GaitTruth, right: GaitTruth) -> float:
-    """The mean along the walk of the independent feet's horizontal error vectors averaged at each
+def averaged_error(res: TwoFeetResult, left: GaitTruth, right: GaitTruth) -> tuple[float, float]:
+    """(final, mean along the walk) of the independent feet's horizontal error vectors averaged at each
     common sample, m: what any coupling that knew exactly where each foot stands relative to the other
     could reach when the feet's errors are independent and alike (their common part is unobservable to
     it); the ceiling of a relative constraint."""
     if res.left is None or res.right is None:
-        return float("nan")
+        return float("nan"), float("nan")
     (il, el), (ir, er) = error_track(res.left, left), error_track(res.right, right)
     common, kl, kr = np.intersect1d(il, ir, assume_unique=True, return_indices=True)
-    return float(np.hypot(*(0.5 * (el[kl] + er[kr])).T).mean()) if common.size else float("nan")
+    if not common.size:
+        return float("nan"), float("nan")
+    e = np.hypot(*(0.5 * (el[kl] + er[kr])).T)
+    return float(e[-1]), float(e.mean())
 
 
 def walk_signals(
@@ -120,29 +124,37 @@ def run(course: str, seed: int, duration_s: float, axes: str, variants: dict[str
         (fl, ml), (fr, mr) = horizontal_errors(res.left, left), horizontal_errors(res.right, right)
         out[name] = (fl, fr, ml, mr, dt, len(res.corrections) + len(res.heading_updates))
         if coupling is None:
-            ceiling = averaged_error(res, left, right)
-            out[CEILING] = (math.nan, math.nan, ceiling, ceiling, dt, 0)
+            final, mean = averaged_error(res, left, right)
+            out[CEILING] = (final, final, mean, mean, dt, 0)
     return out
 
 
-def summarize(summary: dict[tuple[str, str, str], list[tuple[float, float, float, float]]]) -> None:
+Walk = tuple[float, float, float, float, float, float]
+"""One walk in the summary: the two feet's mean error, independent and coupled; their runtimes; the two feet's
+final error, independent and coupled (m, s)."""
+
+
+def summarize(summary: dict[tuple[str, str, str], list[Walk]]) -> None:
     """Print, per axis errors, course (and all courses) and variant: the mean over the walks of the two
     feet's mean error, independent and coupled, its change, the worst change of one walk, the noise
-    (the SD over the seeds of the independent error), the walks worse by more than ``WORSE_M`` and
-    the runtime ratio coupled / independent."""
+    (the SD over the seeds of the independent error), the walks worse by more than ``WORSE_M``, the
+    runtime ratio coupled / independent, and the mean of the two feet's final error and its change."""
     print(
         f"{'axes':<6}{'course':<10}{'variant@R m':>22}  {'indep mean':>10} {'coupled':>8} {'change':>7} "
-        f"{'worst cm':>8} {'noise cm':>8} {'worse>1cm':>10} {'time ratio':>10}"
+        f"{'worst cm':>8} {'noise cm':>8} {'worse>1cm':>10} {'time ratio':>10}  {'indep end':>9} {'coupled':>8} "
+        f"{'change':>7}"
     )
     for (tag, course, name), rows in summary.items():
         a = np.array(rows)
         worse = int(np.count_nonzero(a[:, 1] - a[:, 0] > WORSE_M))
         change = 100.0 * (a[:, 1].mean() / a[:, 0].mean() - 1.0)
+        end_change = 100.0 * (a[:, 5].mean() / a[:, 4].mean() - 1.0)
         noise = 100.0 * float(np.std(a[:, 0], ddof=1)) if course != "all" and len(a) > 1 else math.nan
         print(
             f"{tag:<6}{course:<10}{name:>22}  {a[:, 0].mean():>10.4f} {a[:, 1].mean():>8.4f} {change:>+6.0f}% "
             f"{100.0 * (a[:, 1] - a[:, 0]).max():>+8.2f} {noise:>8.2f} {worse:>6}/{len(a):<3} "
-            f"{a[:, 3].sum() / a[:, 2].sum():>10.2f}"
+            f"{a[:, 3].sum() / a[:, 2].sum():>10.2f}  {a[:, 4].mean():>9.4f} {a[:, 5].mean():>8.4f} "
+            f"{end_change:>+6.0f}%"
         )
 
 
@@ -180,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"two feet, {args.duration:.0f} s walks, mpu6500x4; horizontal error, m (L/R); coupled: {main_r}")
     hdr = f"{'axes':<6}{'course':<10}{'seed':>4}  {'indep end':>11} {'indep mean':>11}  "
     print(hdr + f"{'coupled end':>11} {'cpl mean':>11} {'updates':>7} {'change':>7}")
-    summary: dict[tuple[str, str, str], list[tuple[float, float, float, float]]] = {}
+    summary: dict[tuple[str, str, str], list[Walk]] = {}
     for axes in axes_list:
         tag = "none" if axes == "none" else "axes"
         for course in courses:
@@ -192,7 +204,8 @@ def main(argv: list[str] | None = None) -> int:
                     cfl, cfr, cml, cmr, tc, nc = r[name]
                     cpl_mean = 0.5 * (cml + cmr)
                     for group in (course, "all"):
-                        summary.setdefault((tag, group, name), []).append((ind_mean, cpl_mean, ti, tc))
+                        walk = (ind_mean, cpl_mean, ti, tc, 0.5 * (fl + fr), 0.5 * (cfl + cfr))
+                        summary.setdefault((tag, group, name), []).append(walk)
                     if name == main_r:
                         change = 100.0 * (cpl_mean / ind_mean - 1.0)
                         print(
