@@ -111,6 +111,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     from footnav.app.commands.batch import scheduler_client
     from footnav.app.commands.evaluate import Reading, format_table, run_evaluate
 
+    if args.columns:
+        from footnav.device.files.recordings import CsvMapping
+
+        CsvMapping.parse(args.columns)  # a wrong spec is told once, not once per file
     if args.left or args.right or args.independent_feet or args.distance_only:
         return _evaluate_feet(args)
     if not args.paths:
@@ -132,8 +136,9 @@ def _evaluate_feet(args: argparse.Namespace) -> int:
     from footnav.app.commands.evaluate import Reading, evaluate_pair, format_table, pair_summary
 
     if not (args.left and args.right) or args.paths:
-        missing = "" if args.left and args.right else f" (--{'right' if args.left else 'left'} is missing)"
-        raise FootnavError(f"two feet are evaluated as --left FILE --right FILE, without other recordings{missing}")
+        missing = [f"--{side}" for side, path in (("left", args.left), ("right", args.right)) if path is None]
+        said = f" ({' and '.join(missing)} {'is' if len(missing) == 1 else 'are'} missing)" if missing else ""
+        raise FootnavError(f"two feet are evaluated as --left FILE --right FILE, without other recordings{said}")
     if args.smooth:
         raise FootnavError("--smooth applies to one foot's recording; two feet are evaluated with the causal filter")
     if args.jobs is not None or args.scheduler:

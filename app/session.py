@@ -379,6 +379,14 @@ async def run_device_session(
     )
 
 
+def unit_name(link_name: str, status: StatusLine | FootStatus | None) -> str:
+    """How a warning names a unit: its link, with the foot when a session has two (its ``FootStatus`` is
+    ``left`` or ``right``)."""
+    if isinstance(status, FootStatus) and status.name in ("left", "right"):
+        return f"the {status.name} foot's unit ({link_name})"
+    return link_name
+
+
 async def _start(
     unit: OpenShoeUnit,
     mode: Mode | None,
@@ -450,8 +458,7 @@ async def run_unit_session(
     def idle(seconds: float) -> None:
         if link is not None and link.health.gaps and link.health.gaps[-1].end_ns is None:
             return  # the link reports its own gaps (stall, disconnect, reconnect)
-        who = f"the {status.name} foot's unit ({name})" if isinstance(status, FootStatus) else name
-        log.warning("no data from %s for %.1f s", who, seconds)
+        log.warning("no data from %s for %.1f s", unit_name(name, status), seconds)
 
     if isinstance(status, FootStatus):
         status.clock_rate_hz = lambda: result.clock_rate_hz

@@ -1,13 +1,14 @@
 """Two feet coupled (distance bound, relative heading) against two independent feet, on emulated walks.
 
-    .venv/bin/python -m benchmarks.two_feet [--seeds 4] [--first-seed 1] [--duration 90] [--courses rectangle,...]
-        [--axes none,gyro-bias-calibrated] [--bounds 1.2] [--variants default,distance,heading]
+    .venv/bin/python -m benchmarks.two_feet [--seeds 4] [--first-seed 1] [--draws shared] [--duration 90]
+        [--courses rectangle,...] [--axes none,gyro-bias-calibrated] [--bounds 1.2] [--variants default,...]
         [--heading-sigma 4] [--heading-drift 0] [--heading-drift-per-turn 0.02] [--heading-band 0]
 
 Each course (rectangle, figure-eight, line, stairs; ``--courses`` a subset) and seed is walked by two
 emulated feet (``two_feet_walks``), each given its own errors of the MPU-6500 x4 grade (biases, bias
-instability, noise), without and with the axis errors ``gyro-bias-calibrated`` (the datasheet's
-gyroscope scale and cross-axis errors, which make the heading drift; ``--axes`` one of them). Both feet
+instability, noise; error seeds as ``--draws`` says, ``DRAWS``), without and with the axis errors
+``gyro-bias-calibrated`` (the datasheet's gyroscope scale and cross-axis errors, which make the heading
+drift; ``--axes`` one of them). Both feet
 are navigated independently and coupled (``footnav.pipeline.two_feet``) by each variant of
 ``--variants`` with each bound R of ``--bounds``: ``default`` the default ``FootSeparation`` with R (the
 bound and the relative heading), ``distance`` the distance bound alone, ``heading`` the relative heading
@@ -74,15 +75,22 @@ def averaged_error(res: TwoFeetResult, left: GaitTruth, right: GaitTruth) -> tup
     return float(e[-1]), float(e.mean())
 
 
+DRAWS = ("shared", "own")
+"""How each walk's feet draw their IMU errors: ``shared``, error seeds ``seed`` and ``seed + 1`` (the right foot
+has the draw of the next seed's left foot: the tables of the design pages until 2026-12-08), or ``own``,
+``2 seed`` and ``2 seed + 1`` (no draw in two walks of one course)."""
+
+
 def walk_signals(
-    course: str, seed: int, duration_s: float, axes: str
+    course: str, seed: int, duration_s: float, axes: str, draws: str = "shared"
 ) -> tuple[tuple[GaitTruth, GaitTruth], list[FootSignals]]:
-    """The two feet's truth and their corrupted signals (seeds ``seed`` and ``seed + 1``)."""
+    """The two feet's truth (gait seed ``seed``) and their corrupted signals (error seeds as ``draws`` says)."""
     feet = two_feet_walks(course, duration_s, seed=seed)
+    first = 2 * seed if draws == "own" else seed
     signals = []
     for i, tr in enumerate(feet):
         acc, gyr, _ = corrupt(
-            tr.acc_b_mps2, tr.gyr_b_radps, tr.rate_hz, IMU_GRADES["mpu6500x4"], seed=seed + i, axes=axes
+            tr.acc_b_mps2, tr.gyr_b_radps, tr.rate_hz, IMU_GRADES["mpu6500x4"], seed=first + i, axes=axes
         )
         signals.append(FootSignals(tr.t_s, acc, gyr, tr.rate_hz))
     return feet, signals
@@ -113,9 +121,11 @@ def couplings(variants: list[str], bounds: list[float], heading: RelativeHeading
     return out
 
 
-def run(course: str, seed: int, duration_s: float, axes: str, variants: dict[str, FootSeparation]) -> dict[str, Row]:
+def run(
+    course: str, seed: int, duration_s: float, axes: str, variants: dict[str, FootSeparation], draws: str = "shared"
+) -> dict[str, Row]:
     """Errors (final L, final R, mean L, mean R) and runtimes of one walk, independent and per variant."""
-    (left, right), (sl, sr) = walk_signals(course, seed, duration_s, axes)
+    (left, right), (sl, sr) = walk_signals(course, seed, duration_s, axes, draws)
     out: dict[str, Row] = {}
     for name, coupling in [("ind", None), *variants.items()]:
         t0 = time.perf_counter()
@@ -162,6 +172,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--first-seed", type=int, default=1)
+    ap.add_argument("--draws", choices=DRAWS, default="shared", help="IMU error draws per walk (DRAWS)")
     ap.add_argument("--duration", type=float, default=90.0)
     ap.add_argument("--courses", default=",".join(COURSES), help="comma-separated, of " + ", ".join(COURSES))
     ap.add_argument("--axes", default=",".join(AXES), help="axis errors, comma-separated, of " + ", ".join(AXES))
@@ -197,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
         tag = "none" if axes == "none" else "axes"
         for course in courses:
             for seed in range(args.first_seed, args.first_seed + args.seeds):
-                r = run(course, seed, args.duration, axes, variants)
+                r = run(course, seed, args.duration, axes, variants, args.draws)
                 fl, fr, ml, mr, ti, _ = r["ind"]
                 ind_mean = 0.5 * (ml + mr)
                 for name in [*variants, CEILING]:

@@ -185,10 +185,13 @@ def test_evaluate_says_a_capture_has_no_ground_truth(capture: Path) -> None:
     assert proc.stdout == ""
 
 
-def test_evaluate_names_the_missing_foot(capture: Path) -> None:
+def test_evaluate_names_the_missing_feet(capture: Path) -> None:
     proc = _footnav("evaluate", "--left", str(capture))
     _assert_one_line_error(proc, "two feet are evaluated as --left FILE --right FILE")
     assert "(--right is missing)" in proc.stderr
+    proc = _footnav("evaluate", "--independent-feet", str(capture))
+    _assert_one_line_error(proc, "two feet are evaluated as --left FILE --right FILE")
+    assert "(--left and --right are missing)" in proc.stderr
 
 
 def test_evaluate_with_every_file_skipped_says_so(tmp_path: Path) -> None:

@@ -152,10 +152,31 @@ def test_columns_and_profile_are_read_as_export_reads_them(
     spec = "time=ms:ms,acc=a1;a2;a3:g,gyr=w1;w2;w3,gt=X;Y;Z"
     assert main(["evaluate", str(renamed)]) == 2  # footnav's own names are not there
     capsys.readouterr()
-    assert main(["evaluate", str(renamed), "--columns", spec]) == 0
-    row = capsys.readouterr().out.splitlines()[2].split()
     reference = evaluate_file(pair[0])
-    assert float(row[4]) == pytest.approx(reference.ate_2d_m, abs=1e-3)
+    for jobs in ("1", "2"):  # in this process, and in worker processes (the reading pickled to them)
+        assert main(["evaluate", str(renamed), str(pair[0]), "--columns", spec, "--jobs", jobs]) == 2
+        out, err = capsys.readouterr()
+        row = out.splitlines()[2].split()
+        assert row[0] == "other-tool" and float(row[4]) == pytest.approx(reference.ate_2d_m, abs=1e-3)
+        assert "left.csv" in err and "not found" in err  # footnav's own names are not those of --columns
+    assert main(["evaluate", "--left", str(renamed), "--right", str(renamed), "--columns", spec]) == 0
+    assert "two feet coupled:" in capsys.readouterr().out
     generic, mpu = (evaluate_pair(*pair, reading=Reading(profile=p)) for p in ("generic", "mpu6500x4"))
     assert [r.ate_2d_m for r in generic] == [r.ate_2d_m for r in evaluate_pair(*pair)]  # a CSV's default profile
     assert all(g.ate_2d_m != m.ate_2d_m for g, m in zip(generic, mpu, strict=True))
+
+
+def test_a_pairs_input_handling_is_each_files_own(pair: tuple[Path, Path], tmp_path: Path) -> None:
+    """Gyroscopes cut off at 4 rad/s: each foot's row of a pair tells what was done with its clipped rates, as
+    ``evaluate`` of the file alone tells it."""
+    clipped = []
+    for path in pair:
+        table = np.loadtxt(path, delimiter=",", skiprows=1)
+        table[:, 4:7] = np.clip(table[:, 4:7], -4.0, 4.0)
+        clipped.append(tmp_path / path.name)
+        np.savetxt(clipped[-1], table, fmt="%.10g", delimiter=",", header=path.read_text().split("\n")[0], comments="")
+    rows = evaluate_pair(*clipped)
+    for side, path in enumerate(clipped):
+        alone = evaluate_file(path).handling
+        assert "gyroscope values taken as clipped" in alone
+        assert rows[side].handling == rows[2 + side].handling == alone  # coupled and independent rows alike

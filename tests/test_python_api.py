@@ -139,6 +139,8 @@ def test_the_user_guide_example_runs_as_written(
     assert end_error < 0.05
     pair_error_m = namespace["pair_error_m"]
     assert np.mean(pair_error_m["coupled"]) < np.mean(pair_error_m["independent"])  # type: ignore[index]
+    apart_m = namespace["apart_m"]  # the feet in one frame: 0.2 m apart at the start, a step apart walking
+    assert abs(apart_m[0] - 0.2) < 0.005 and 0.4 < np.median(apart_m) < 0.7  # type: ignore[index, call-overload]
     shown = re.search(r"^```text\n(coupled .*?)^```$", guide, flags=re.MULTILINE | re.DOTALL)
     assert shown is not None and shown.group(1) in capsys.readouterr().out
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 
 import numpy as np
+from footnav.app.session import unit_name
 from footnav.app.status import StatusLine
 from footnav.pipeline.nav_types import NavBatch
 
@@ -24,3 +25,10 @@ def test_a_foot_with_no_estimate_yet_is_aligning_not_in_swing() -> None:
     assert right.text(with_name=True).endswith("aligning    0.00 m")  # was "swing": nothing navigated yet
     right(_batch(50, stance=False))
     assert right.text(with_name=True).endswith("swing     0.00 m")
+
+
+def test_a_silent_unit_is_named_by_its_foot_only_when_there_are_two() -> None:
+    two, one = StatusLine(io.StringIO(), feet=("left", "right")), StatusLine(io.StringIO())
+    assert unit_name("/dev/pts/3", two.foot("right")) == "the right foot's unit (/dev/pts/3)"
+    assert unit_name("/dev/ttyACM0", one.foot("foot")) == "/dev/ttyACM0"  # live --port: one foot, named "foot"
+    assert unit_name("/dev/ttyACM0", one) == unit_name("/dev/ttyACM0", None) == "/dev/ttyACM0"

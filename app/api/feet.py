@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 from footnav.app.commands.export import (
+    count_clipped_rates,
     foot_path,
     load_other_recording,
     recording_config,
@@ -87,7 +87,7 @@ def navigate_pair(
     ):
         if nav is None:
             raise FootnavError(f"{rec.name}: the unit is never still, so roll and pitch cannot be aligned")
-        stats.rates_reconstructed, stats.rates_clipped = sat.reconstructed, int(np.count_nonzero(sat.clipped_b))
+        count_clipped_rates(stats, sat)
     return result
 
 

@@ -7,7 +7,6 @@ errors also as a percentage of the distance walked. One default configuration fo
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -95,7 +94,15 @@ def evaluate_file(
 
 
 def score(
-    rec: Recording, est_n_m: F64, skipped: int, *, name: str, samples: int, handling: str = "", feet: str = ""
+    rec: Recording,
+    est_n_m: F64,
+    skipped: int,
+    *,
+    name: str,
+    samples: int,
+    handling: str = "",
+    feet: str = "",
+    coupling: str = "",
 ) -> Evaluation:
     """The figures of one foot's track ``est_n_m`` (m, samples ``skipped`` on of ``rec``) against the recording's
     ground truth, or its loop closure when it has none."""
@@ -118,6 +125,7 @@ def score(
             end_point_m=float(np.linalg.norm(aligned[-1] - gt[-1])),
             handling=handling,
             feet=feet,
+            coupling=coupling,
         )
     loop_3d, loop_2d = loop_closure_error(est_n_m)
     return Evaluation(
@@ -130,6 +138,7 @@ def score(
         end_point_m=loop_3d,
         handling=handling,
         feet=feet,
+        coupling=coupling,
     )
 
 
@@ -163,13 +172,16 @@ def evaluate_pair(
             recs[0], recs[1], coupled=coupled, bound=bound, stance_levels=stance_levels, profile=reading.profile
         )
         how = "coupled" if coupled else "independent"
-        counts = coupling_counts(result, bound) if bound is not None and coupled else ""
+        counts = coupling_counts(result, bound) if coupled and bound is not None else ""
         feet = ((result.left, result.left_stats), (result.right, result.right_stats))
         for side, rec, (nav, stats) in zip(("L", "R"), recs, feet, strict=True):
             assert nav is not None  # navigate_pair raises otherwise
             name = f"{side} {how} {rec.name}"
-            row = score(rec, nav.pos_n_m, stats.samples_before_alignment, name=name, samples=len(nav), feet=how)
-            rows.append(dataclasses.replace(row, handling=input_handling(stats), coupling=counts))
+            skipped, handling = stats.samples_before_alignment, input_handling(stats)
+            row = score(
+                rec, nav.pos_n_m, skipped, name=name, samples=len(nav), handling=handling, feet=how, coupling=counts
+            )
+            rows.append(row)
     return rows
 
 

@@ -31,7 +31,7 @@ from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.navigation.lead_in import RecordingRun, navigate_every_sample
 from footnav.pipeline.navigation.navigator import NavConfig, NavStats, navigate
 from footnav.pipeline.navigation.profiles import get_profile
-from footnav.pipeline.navigation.saturation import reconstruct_saturated_rates
+from footnav.pipeline.navigation.saturation import SaturatedRates, reconstruct_saturated_rates
 from footnav.pipeline.navigation.warm import build_kernels
 from numpy.typing import NDArray
 
@@ -116,9 +116,14 @@ def navigate_recording(
             f"{rec.name}: the unit is never still for {config.align_s:.1f} s, so roll and pitch cannot be "
             "aligned; a recording must start (or at least include) a moment of standing still"
         )
+    count_clipped_rates(stats, sat)
+    return nav, stats
+
+
+def count_clipped_rates(stats: NavStats, sat: SaturatedRates) -> None:
+    """Put what the saturated-rate reconstruction did into a navigator's counts (``input_handling`` tells it)."""
     stats.rates_reconstructed = sat.reconstructed
     stats.rates_clipped = int(np.count_nonzero(sat.clipped_b))
-    return nav, stats
 
 
 CLEARANCE_COLUMNS = ("clearance", "clearance_swing", "floor_z")
