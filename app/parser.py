@@ -181,9 +181,7 @@ def _add_lever_arm_arg(p: argparse.ArgumentParser) -> None:
 
 def _add_output_args(p: argparse.ArgumentParser, *, capture: bool) -> None:
     p.add_argument("--save", type=Path, metavar="FILE.rrd", help="also write the recording to this file")
-    p.add_argument(
-        "--no-viewer", action="store_true", help="no viewer: Rerun output goes to the --save file only, or nowhere"
-    )
+    p.add_argument("--no-viewer", action="store_true", help="no viewer (Rerun output only to a --save file)")
     p.add_argument("--web", action="store_true", help="serve the web viewer on 127.0.0.1 and print its URL")
     p.add_argument(
         "--keep-web",
@@ -489,9 +487,7 @@ def _add_export_command(sub: Commands) -> None:
     )
     _add_recording_args(export)
     _add_jobs_arg(export)
-    feet = _add_feet_coupling_args(
-        export, default="coupled; on one clock, to TRACK-left.csv, TRACK-right.csv, each in its own foot's frame"
-    )
+    feet = _add_feet_coupling_args(export, default="coupled; to TRACK-left.csv, TRACK-right.csv in each foot's frame")
     feet.add_argument("--left", type=Path, metavar="FILE", help="the left foot's recording (with --right)")
     feet.add_argument("--right", type=Path, metavar="FILE", help="the right foot's recording (with --left)")
 
@@ -525,12 +521,8 @@ def _positive_int(text: str) -> int:
 def _add_evaluate_command(sub: Commands) -> None:
     evaluate = sub.add_parser("evaluate", help="accuracy on recordings with ground truth or a closed loop")
     evaluate.add_argument("paths", type=Path, nargs="*", metavar="PATH", help="recordings, or folders of them")
-    _add_reading_args(evaluate)
-    _add_smooth_arg(evaluate)
-    _add_levels_arg(evaluate)
-    feet = evaluate.add_argument_group(
-        "two feet", "a left and a right recording on one clock, navigated together by the causal filter (no --smooth)"
-    )
+    _add_recording_args(evaluate)
+    feet = evaluate.add_argument_group("two feet", "a left and a right recording on one clock, navigated together")
     feet.add_argument("--left", type=Path, metavar="FILE", help="the left foot's recording (with --right)")
     feet.add_argument("--right", type=Path, metavar="FILE", help="the right foot's recording (with --left)")
     feet.add_argument(
@@ -566,12 +558,6 @@ def _add_config_command(sub: Commands) -> None:
 
 
 def _add_recording_args(parser: argparse.ArgumentParser) -> None:
-    _add_reading_args(parser)
-    _add_smooth_arg(parser)
-    _add_levels_arg(parser)
-
-
-def _add_reading_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--format", choices=RECORDING_FORMATS, help="recording format (default: detected from the file)"
     )
@@ -582,6 +568,8 @@ def _add_reading_args(parser: argparse.ArgumentParser) -> None:
         "gt=X;Y;Z,profile=NAME",
     )
     parser.add_argument("--profile", choices=PROFILES, help="unit profile (default: the format's sensor)")
+    _add_smooth_arg(parser)
+    _add_levels_arg(parser)
 
 
 def _add_smooth_arg(parser: argparse.ArgumentParser) -> None:
