@@ -16,6 +16,7 @@ from footnav.app.parser import build_parser
 from footnav.pipeline.errors import FootnavError
 
 if TYPE_CHECKING:
+    from footnav.app.commands.evaluate import Reading
     from footnav.app.config import Config
     from footnav.views.lsl import LslRequest
 
@@ -115,12 +116,12 @@ def _evaluate(args: argparse.Namespace) -> int:
         from footnav.device.files.recordings import CsvMapping
 
         CsvMapping.parse(args.columns)  # a wrong spec is told once, not once per file
+    reading = Reading(args.format, args.columns, args.profile)
     if args.left or args.right or args.independent_feet or args.distance_only:
-        return _evaluate_feet(args)
+        return _evaluate_feet(args, reading)
     if not args.paths:
         raise FootnavError("evaluate needs recordings (PATH ...), or a pair of them: --left FILE --right FILE")
     with scheduler_client(args.scheduler) as client:
-        reading = Reading(args.format, args.columns, args.profile)
         rows, problems = run_evaluate(args.paths, args.smooth, args.stance_levels, args.jobs, client, reading)
     if rows:
         print(format_table(rows))
@@ -132,8 +133,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     return 2 if problems else 0
 
 
-def _evaluate_feet(args: argparse.Namespace) -> int:
-    from footnav.app.commands.evaluate import Reading, evaluate_pair, format_table, pair_summary
+def _evaluate_feet(args: argparse.Namespace, reading: Reading) -> int:
+    from footnav.app.commands.evaluate import evaluate_pair, format_table, pair_summary
 
     if not (args.left and args.right) or args.paths:
         missing = [f"--{side}" for side, path in (("left", args.left), ("right", args.right)) if path is None]
@@ -151,7 +152,7 @@ def _evaluate_feet(args: argparse.Namespace) -> int:
         independent_only=args.independent_feet,
         heading=not args.distance_only,
         stance_levels=args.stance_levels,
-        reading=Reading(args.format, args.columns, args.profile),
+        reading=reading,
     )
     print(format_table(rows))
     print(pair_summary(rows))

@@ -178,10 +178,11 @@ def evaluate_pair(
             assert nav is not None  # navigate_pair raises otherwise
             name = f"{side} {how} {rec.name}"
             skipped, handling = stats.samples_before_alignment, input_handling(stats)
-            row = score(
-                rec, nav.pos_n_m, skipped, name=name, samples=len(nav), handling=handling, feet=how, coupling=counts
+            rows.append(
+                score(
+                    rec, nav.pos_n_m, skipped, name=name, samples=len(nav), handling=handling, feet=how, coupling=counts
+                )
             )
-            rows.append(row)
     return rows
 
 
