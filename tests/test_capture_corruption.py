@@ -150,6 +150,22 @@ def test_one_flipped_bit_anywhere_costs_at_most_its_own_chunk(walk: tuple[Path, 
     assert outcomes["named error"] >= 1, outcomes
 
 
+def test_a_flipped_bit_in_a_chunks_opcode_loses_nothing(walk: tuple[Path, NavBatch], tmp_path: Path) -> None:
+    """Each of the 8 bits of a chunk record's opcode byte: the record then names another kind (0x07, a message
+    index, among them), which the reader used to skip with its messages and no gap. Its fields and CRC are a
+    chunk's, so it is read whole: every message, no gap, its offset kept as repaired."""
+    path, _ = walk
+    whole = [(m.foot, m.direction, m.host_ns, m.data) for m in messages(path)]
+    start = chunks(path)[3][0]
+    for bit in range(8):
+        state = ReadState()
+        got = messages(flipped(path, tmp_path / "bad.mcap", 8 * start + bit), state)
+        assert [(m.foot, m.direction, m.host_ns, m.data) for m in got] == whole, bit
+        assert not state.gaps and state.repaired == [start], (bit, state.gaps, state.repaired)
+    state = ReadState()
+    assert messages(path, state) and state.repaired == []  # an intact file: nothing repaired
+
+
 @pytest.mark.parametrize("where", [0.3, 0.6, 0.97])
 def test_replay_resumes_at_the_next_intact_chunk_and_reports_the_gap(
     walk: tuple[Path, NavBatch], tmp_path: Path, capsys: pytest.CaptureFixture[str], where: float

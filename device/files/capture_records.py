@@ -15,6 +15,9 @@ start inside compressed data is as unlikely as a CRC-32 collision. Each skipped 
 :class:`Gap` (file offsets); a record running past the end of the file with no chunk after it is a
 file cut short (a killed writer, a full disk), not a gap.
 
+A record whose opcode is not a chunk's but whose fields and CRC are a chunk's is a chunk with a damaged
+opcode byte: it is read whole, and its offset kept in ``RecordState.repaired``.
+
 Metadata records are returned as :class:`RawMetadata`: their strings decoded with
 ``surrogateescape`` (a flipped high bit is kept, not an exception) and their body bytes, which the
 header checksum (``footnav.device.files.capture_header``) covers.
@@ -94,6 +97,8 @@ class RecordState:
     """The file ended inside a record, with no intact chunk after it."""
     bytes_read: int = 0
     size: int = 0
+    repaired: list[int] = field(default_factory=list)
+    """File offsets of chunks read whole although their opcode byte was damaged (nothing lost)."""
 
     @property
     def corrupt_at(self) -> int | None:
@@ -263,6 +268,17 @@ def _read_record(f: IO[bytes], pos: int, size: int) -> tuple[int, bytes] | None:
     return opcode, f.read(length)
 
 
+def _misnamed_chunk(body: bytes, at: int, size: int) -> list[Any] | None:
+    """The contents of the record at ``at`` when it is a chunk whose opcode byte alone is damaged (its fixed
+    fields agree, as :func:`chunk_candidate` checks, and its records pass the chunk CRC); else None."""
+    if not chunk_candidate(struct.pack("<BQ", Opcode.CHUNK, len(body)) + body[: _HEAD - 9], at, size):
+        return None
+    try:
+        return _decode(Opcode.CHUNK, body)
+    except Exception:  # not a chunk after all: the record is read as what its opcode says
+        return None
+
+
 def capture_records(f: IO[bytes], state: RecordState, *, strict: Callable[[], bool] = lambda: False) -> Iterator[Any]:
     """The records of the open MCAP file ``f`` (magic included) up to its ``DataEnd``: MCAP records,
     chunks' contents in order, :class:`RawMetadata` for metadata.
@@ -289,9 +305,15 @@ def capture_records(f: IO[bytes], state: RecordState, *, strict: Callable[[], bo
     gap_start: int | None = None
     while pos < size:
         failed = False
+        records: list[Any] | None
         try:
             record = _read_record(f, pos, size)
-            records = None if record is None else _decode(*record)
+            chunk = None if record is None or record[0] == Opcode.CHUNK else _misnamed_chunk(record[1], pos, size)
+            if record is not None and chunk is not None:
+                record, records = (Opcode.CHUNK, record[1]), chunk
+                state.repaired.append(pos)
+            else:
+                records = None if record is None else _decode(*record)
         except Exception as exc:  # a corrupt record makes the MCAP and zstd decoders raise many kinds
             if strict():
                 raise ValueError(f"record at byte {pos} does not decode ({type(exc).__name__}: {exc})") from exc
