@@ -233,12 +233,20 @@ def _unpack(theta: F64) -> tuple[F64, F64, F64, F64, F64]:
 
 
 def invert_model(theta: F64, acc_mps2: F64, dtemp_c: F64) -> F64:
-    """u = (K L + K_T ΔT)⁻¹ (y − b − b_T ΔT) for m samples: y (m, 3), ΔT (m,) -> u (m, 3)."""
+    """u = (K L + K_T ΔT)⁻¹ (y − b − b_T ΔT) for m samples: y (m, 3), ΔT (m,) -> u (m, 3).
+
+    K L + K_T ΔT is lower triangular: forward substitution in elementwise operations, so each sample's
+    result is the same bit for bit whatever batch it comes in (live and replay batch differently).
+    """
     kl, b, kt, bt, _ = _unpack(np.asarray(theta, dtype=np.float64))
     dt = np.asarray(dtemp_c, dtype=np.float64)
-    mats = kl[None, :, :] + dt[:, None, None] * np.diag(kt)[None, :, :]
     rhs = np.asarray(acc_mps2, dtype=np.float64) - b - dt[:, None] * bt
-    return np.asarray(np.linalg.solve(mats, rhs[:, :, None])[:, :, 0], dtype=np.float64)
+    diag = np.diag(kl)[None, :] + dt[:, None] * kt
+    u = np.empty_like(rhs)
+    u[:, 0] = rhs[:, 0] / diag[:, 0]
+    u[:, 1] = (rhs[:, 1] - kl[1, 0] * u[:, 0]) / diag[:, 1]
+    u[:, 2] = (rhs[:, 2] - kl[2, 0] * u[:, 0] - kl[2, 1] * u[:, 1]) / diag[:, 2]
+    return u
 
 
 def forward_model(theta: F64, u_mps2: F64, dtemp_c: F64) -> F64:
@@ -325,11 +333,7 @@ class ImuCalibration:
             dt = np.zeros(n)
         else:
             dt = np.asarray(temp_c, dtype=np.float64) - self.t_ref_c
-        if not self.temperature_model or temp_c is None:
-            kl, b, _, _, _ = _unpack(self.theta)
-            acc_c = np.linalg.solve(kl, (acc - b).T).T
-        else:
-            acc_c = invert_model(self.theta, acc, dt)
+        acc_c = invert_model(self.theta, acc, dt)
         gyr_bias = self.gyr_bias_radps + dt[:, None] * self.gyr_bias_slope_radps_per_c
         gyr = np.asarray(gyr_b_radps, dtype=np.float64) - gyr_bias
         return np.asarray(acc_c, dtype=np.float64), np.asarray(gyr, dtype=np.float64)
