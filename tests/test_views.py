@@ -19,7 +19,7 @@ from footnav.views import convert
 from footnav.views.blueprint import build_blueprint
 from footnav.views.logger import DEFAULT_ELLIPSOID_EVERY, RerunLogger
 from footnav.views.paths import EVENTS, TIMELINE, FootPaths
-from footnav.views.sinks import choose_sinks, has_display
+from footnav.views.sinks import has_display
 from numpy.typing import NDArray
 from rerun.chunk import RrdReader
 
@@ -340,29 +340,51 @@ def test_blueprint_builds_for_two_feet() -> None:
 # ---------------------------------------------------------------- sinks.py
 
 
-def test_choose_sinks_without_display(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_without_a_display_the_session_is_saved_and_says_how_to_open_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from footnav.views.outputs import open_session_views
+    from footnav.views.sinks import rerun_command
+
     monkeypatch.chdir(tmp_path)
     env: dict[str, str] = {}
-    assert not has_display(env) or has_display(env) is True  # macOS/Windows always report a display
     if has_display(env):
-        pytest.skip("platform always has a display")
-    sinks, desc = choose_sinks(None, True, environ=env)
-    assert len(sinks) == 1 and isinstance(sinks[0], rr.FileSink)
-    assert "no display" in desc and "footnav-" in desc and "rerun " in desc
-    sinks, desc = choose_sinks(tmp_path / "x.rrd", True, environ=env)
-    assert len(sinks) == 1 and str(tmp_path / "x.rrd") in desc
-    sinks, desc = choose_sinks(tmp_path / "y.rrd", False, environ=env)
-    assert len(sinks) == 1 and "no display" not in desc
-    sinks, desc = choose_sinks(None, False, environ=env)
-    assert sinks == [] and "off" in desc
+        pytest.skip("macOS and Windows always report a display")
+
+    def kinds(save: Path | None, want_viewer: bool) -> tuple[list[str], str]:
+        views, notes = open_session_views(
+            save=save, want_viewer=want_viewer, recording_id="no-display", notice=print, environ=env
+        )
+        out = [] if views is None else [o.kind for o in views.outputs]
+        if views is not None:
+            assert views.close() == []
+        return out, "; ".join(notes)
+
+    out, desc = kinds(None, True)
+    (saved,) = tmp_path.glob("footnav-*.rrd")
+    assert out == ["recording file"] and "no display" in desc and f"saving to {saved}" in desc
+    exe = rerun_command()
+    assert f"`{exe} {saved.name}` on a machine with a display" in desc  # relative to the working directory
+    assert f"in a browser: `{exe} --web-viewer --bind 127.0.0.1 {saved.name}`" in desc
+    out, desc = kinds(tmp_path / "y.rrd", False)
+    assert out == ["recording file"] and "no display" not in desc and str(tmp_path / "y.rrd") in desc
+    assert kinds(None, False) == ([], "Rerun output off (no viewer, no file)")
 
 
-@pytest.mark.skipif(sys.platform != "linux", reason="a bogus DISPLAY only stops the viewer on Linux")
-def test_viewer_that_cannot_open_a_window_falls_back_to_a_file(tmp_path: Path) -> None:
-    env = {**os.environ, "DISPLAY": ":987", "WAYLAND_DISPLAY": ""}
-    sinks, desc = choose_sinks(tmp_path / "fallback.rrd", True, environ=env)
-    assert [type(s) for s in sinks] == [rr.FileSink]
-    assert "viewer not started" in desc and "fallback.rrd" in desc
+def test_the_hint_names_the_rerun_of_this_install(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without the environment activated ``rerun`` is not on PATH: the hint gives the command's path."""
+    from footnav.views.sinks import open_hint, rerun_command
+
+    exe = Path(sys.executable).parent / ("rerun.exe" if sys.platform == "win32" else "rerun")
+    assert exe.is_file()  # installed with rerun-sdk
+    monkeypatch.setenv("PATH", str(exe.parent))
+    assert rerun_command() == "rerun"
+    monkeypatch.setenv("PATH", str(tmp_path))
+    monkeypatch.chdir(tmp_path)
+    assert rerun_command() == str(exe)
+    monkeypatch.chdir(exe.parent.parent)
+    assert rerun_command() == str(Path(exe.parent.name) / exe.name)
+    assert open_hint(Path("a b.rrd"), {"DISPLAY": ":0"}) == f"view it with `{rerun_command()} 'a b.rrd'`"
 
 
 def test_step_onsets_floor_ellipses_and_heading() -> None:

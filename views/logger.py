@@ -151,7 +151,7 @@ class RerunLogger:
     Parameters
     ----------
     sinks
-        where the recording goes (see :func:`footnav.views.sinks.choose_sinks`); at least one.
+        where the recording goes (see :func:`footnav.views.outputs.open_session_views`); at least one.
     recording_id
         one id per walking session; files and viewers merge streams with equal ids.
     feet

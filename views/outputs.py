@@ -40,6 +40,7 @@ from footnav.views.sinks import (
     check_writable,
     default_save_path,
     has_display,
+    open_hint,
     serve_web_viewer,
     spawn_viewer,
     stop_process,
@@ -368,7 +369,7 @@ def open_session_views(
         else:
             web_out = Output("web viewer", page, logger(rr.GrpcSink(grpc_url)), proc, folder=folder, keep=keep_web)
             outputs.append(web_out)
-            until = "kept after the session" if keep_web else "until the session ends"
+            until = "kept after the session" if keep_web else "until the session ends; --keep-web keeps it"
             notes.append(f"web viewer (127.0.0.1 only, pid {proc.pid}, {until}): open {page}")
     elif want_viewer:
         if has_display(environ):
@@ -393,7 +394,7 @@ def open_session_views(
         else:
             sink = rr.FileSink(str(path), write_footer=rrd_footer)
             outputs.append(Output("recording file", str(path), logger(sink), path=path))
-            notes.append(f"saving to {path}; view it with `rerun {path}`")
+            notes.append(f"saving to {path}; {open_hint(path, environ)}")
     if not outputs:
         notes.append("Rerun output off (no viewer, no file)")
         return None, notes

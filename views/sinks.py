@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shlex
+import shutil
 import signal
 import socket
 import subprocess
@@ -23,7 +25,6 @@ from collections.abc import Mapping
 from datetime import datetime
 from pathlib import Path
 
-import rerun as rr
 from footnav.pipeline.errors import FootnavError
 from footnav.views.rerun_env import (
     VIEWER_FLAGS,
@@ -32,7 +33,6 @@ from footnav.views.rerun_env import (
     remove_private_folder,
     rerun_environment,
 )
-from rerun.sinks import LogSinkLike
 
 LOOPBACK = "127.0.0.1"
 VIEWER_MEMORY_LIMIT = "25%"
@@ -356,44 +356,28 @@ def default_save_path(now: datetime | None = None, directory: Path | None = None
     return (directory or Path.cwd()) / f"footnav-{stamp}.rrd"
 
 
-def choose_sinks(
-    save_path: Path | None,
-    want_viewer: bool,
-    *,
-    environ: Mapping[str, str] | None = None,
-    memory_limit: str = VIEWER_MEMORY_LIMIT,
-) -> tuple[list[LogSinkLike], str]:
-    """Pick the Rerun sinks for a session and describe the choice in one line for the terminal.
+def rerun_command() -> str:
+    """How to call the ``rerun`` command of this install: ``rerun`` when it is the one on ``PATH``,
+    else its path (relative to the working directory when inside it, e.g. ``.venv/bin/rerun``)."""
+    exe = Path(sys.executable).parent / ("rerun.exe" if sys.platform == "win32" else "rerun")
+    found = shutil.which("rerun")
+    if not exe.is_file() or (found is not None and Path(found).resolve() == exe.resolve()):
+        return "rerun"
+    return _shown(exe)
 
-    - viewer wanted and a display present: spawn a native viewer (127.0.0.1) and stream to it;
-      if it fails to start, fall back to a file;
-    - viewer wanted, no display: save to ``save_path`` or :func:`default_save_path`;
-    - ``save_path`` given: always also a ``FileSink`` (footer written on close).
 
-    ``environ`` stands in for ``os.environ`` (display detection and the viewer's environment).
-    An empty list means Rerun output is off (no viewer wanted, no file); do not create a logger then.
-    May block up to :data:`VIEWER_START_TIMEOUT_S` while a viewer starts.
-    """
-    sinks: list[LogSinkLike] = []
-    notes: list[str] = []
-    fallback = False
-    if want_viewer:
-        if has_display(environ):
-            try:
-                url, proc = spawn_viewer(memory_limit=memory_limit, env=environ)
-            except ViewerStartError as exc:
-                notes.append(f"viewer not started: {exc}")
-                fallback = True
-            else:
-                sinks.append(rr.GrpcSink(url))
-                notes.append(f"streaming to a Rerun viewer (pid {proc.pid}, {url}, memory limit {memory_limit})")
-        else:
-            notes.append("no display (neither DISPLAY nor WAYLAND_DISPLAY is set): no viewer")
-            fallback = True
-    path = save_path if save_path is not None else (default_save_path() if fallback else None)
-    if path is not None:
-        sinks.append(rr.FileSink(str(path)))
-        notes.append(f"saving to {path}; view it with `rerun {path}`")
-    if not sinks:
-        notes.append("Rerun output off (no viewer, no --save)")
-    return sinks, "; ".join(notes)
+def _shown(path: Path) -> str:
+    """``path`` quoted for a shell, relative to the working directory when inside it."""
+    with contextlib.suppress(ValueError):
+        return shlex.quote(str(path.absolute().relative_to(Path.cwd())))
+    return shlex.quote(str(path))
+
+
+def open_hint(path: Path, environ: Mapping[str, str] | None = None) -> str:
+    """The command that opens the recording ``path``: the native viewer, or without a display a
+    viewer in the browser (:data:`LOOPBACK` only)."""
+    exe, name = rerun_command(), _shown(path)
+    if has_display(environ):
+        return f"view it with `{exe} {name}`"
+    browser = f"{exe} --web-viewer --bind {LOOPBACK} {name}"
+    return f"view it with `{exe} {name}` on a machine with a display, or here in a browser: `{browser}`"
