@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import difflib
 import logging
 import math
 import os
@@ -464,10 +465,28 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     if args.command == "experiment":  # its own parser, built when it runs
         args.experiment_argv = rest
     elif rest:
-        parser.error(f"unrecognized arguments: {' '.join(rest)}")
+        _command_parser(parser, args.command).error(_unrecognized(parser, args.command, rest))
     if getattr(args, "keep_web", False) and not args.web:
         parser.error("--keep-web keeps the web viewer of --web: give --web too")
     return args
+
+
+def _command_parser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser:
+    """The sub-parser of ``command`` (its usage goes with an error in its options)."""
+    (commands,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    found: argparse.ArgumentParser = commands.choices[command]
+    return found
+
+
+def _unrecognized(parser: argparse.ArgumentParser, command: str, rest: list[str]) -> str:
+    """The error for arguments ``command`` does not take, with the closest option to each unknown one."""
+    options = [o for a in _command_parser(parser, command)._actions for o in a.option_strings]
+    hints = []
+    for arg in rest:
+        if arg.startswith("-"):
+            close = difflib.get_close_matches(arg.split("=", 1)[0], options, n=1, cutoff=0.75)
+            hints += [f"{arg.split('=', 1)[0]}: did you mean {close[0]}?"] if close else []
+    return f"unrecognized arguments: {' '.join(rest)}" + "".join(f"; {h}" for h in hints)
 
 
 def _run_command(args: argparse.Namespace, argv: list[str]) -> int:

@@ -65,6 +65,16 @@ def test_demo_options_the_emulator_cannot_serve_are_one_line(args: list[str], sa
     _assert_one_line_error(_footnav("demo", *args, "--no-viewer", "--sessions", str(tmp_path)), said)
 
 
+def test_a_misspelled_option_gets_its_commands_usage_and_the_closest_option() -> None:
+    proc = _footnav("export", "walk.csv", "--colums", "time=ts:ms", "-o", "x.csv")
+    assert proc.returncode == 2 and proc.stderr.startswith("usage: footnav export "), proc.stderr
+    assert proc.stderr.splitlines()[-1] == (
+        "footnav export: error: unrecognized arguments: --colums time=ts:ms; --colums: did you mean --columns?"
+    )
+    proc = _footnav("replay", "walk.csv", "--foo")
+    assert proc.stderr.splitlines()[-1] == "footnav replay: error: unrecognized arguments: --foo"  # nothing close
+
+
 def test_the_parser_knows_the_speeds_the_gait_model_covers() -> None:
     from footnav.app.parser import WALKING_SPEED_MPS
 
@@ -148,7 +158,8 @@ def _track(path: Path) -> np.ndarray:
 
 def test_a_capture_without_tof_is_exported_smoothed(capture: Path, tmp_path: Path) -> None:
     causal, whole, step = tmp_path / "causal.csv", tmp_path / "whole.csv", tmp_path / "step.csv"
-    assert _footnav("export", str(capture), "-o", str(causal)).returncode == 0
+    proc = _footnav("export", str(capture), "-o", str(causal))
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr  # no replay notes or progress lines in a log
     proc = _footnav("export", str(capture), "-o", str(whole), "--smooth")
     assert proc.returncode == 0, proc.stderr
     assert "RTS-smoothed" in proc.stdout
@@ -212,6 +223,32 @@ def test_an_empty_csv_is_called_empty(tmp_path: Path, content: str, said: str) -
     proc = _footnav("export", str(path), "-o", str(tmp_path / "t.csv"))
     _assert_one_line_error(proc, said, "header row")
     assert "the header has" not in proc.stderr
+
+
+def test_a_csv_without_the_default_columns_says_how_to_read_it(tmp_path: Path) -> None:
+    from footnav.device.files.recordings import CsvMapping, InputFormatError, load_recording
+
+    path = tmp_path / "walk.csv"
+    path.write_text("ts,ax,ay,az,gx,gy,gz\n0,0,0,9.8,0,0,0\n")
+    with pytest.raises(InputFormatError, match=r"column t not found; .* name its columns and units with --columns"):
+        load_recording(path)
+    with pytest.raises(InputFormatError, match=r"column tt not found; the header has ts, ax, ay, az, gx, gy, gz$"):
+        load_recording(path, mapping=CsvMapping.parse("time=tt"))  # --columns given: its names are wrong
+    path.write_text("t;ax;ay;az;gx;gy;gz\n0;0;0;9.8;0;0;0\n")
+    with pytest.raises(InputFormatError, match=r"separated by ';' \(header t;ax.*footnav reads comma-separated CSV"):
+        load_recording(path)
+
+
+def test_a_rerun_recording_is_told_apart_from_a_recording_to_navigate(tmp_path: Path) -> None:
+    import rerun as rr
+
+    path = tmp_path / "walk.rrd"
+    rec = rr.RecordingStream("footnav-test")
+    rec.save(str(path))
+    rec.log("points", rr.Points3D([[0.0, 0.0, 0.0]]))
+    rec.disconnect()
+    proc = _footnav("replay", str(path), "--no-viewer")
+    _assert_one_line_error(proc, "is a Rerun recording (.rrd)", f"open it with `rerun {path}`")
 
 
 def test_a_mat_file_that_is_not_a_pyshoe_trial_says_what_reads_it(tmp_path: Path) -> None:

@@ -509,7 +509,7 @@ def _replayed_capture(source: Path) -> dict[str, NavBatch]:
     def collect(foot: str) -> Callable[[NavBatch], None]:
         return got.setdefault(foot, []).append
 
-    code = run_replay(ReplayOptions(path=source, config=defaults(), viewer=False, collect=collect))
+    code = run_replay(ReplayOptions(path=source, config=defaults(), viewer=False, collect=collect, quiet=True))
     if code == 130:
         raise KeyboardInterrupt
     if code != 0:

@@ -100,7 +100,9 @@ class ReplayOptions:
         window in session seconds (device time since the first sample, the
         recording's ``imu_time``), exact to the sample.
     collect
-        tests: an extra NavSink per foot.
+        an extra NavSink per foot (``export`` of a capture, tests).
+    quiet
+        a step of another command (``export``): no start line or output notes, progress only on a terminal.
     tof
         pass the unit's ToF readings to the navigator (False: the same capture navigated
         inertial-only, to measure what the ToF sensors add).
@@ -129,6 +131,7 @@ class ReplayOptions:
     stance: str | None = None
     lsl: LslRequest | None = None
     feet_coupling: str | None = None
+    quiet: bool = False
 
 
 def checked_summary(opts: ReplayOptions) -> CaptureSummary:
@@ -252,6 +255,12 @@ def captured_coupling(session: Mapping[str, str]) -> str:
     return coupling
 
 
+def _say(opts: ReplayOptions, *lines: str) -> None:
+    """``lines`` on stderr, unless the replay is a step of another command (``opts.quiet``)."""
+    for line in () if opts.quiet else lines:
+        print(line, file=sys.stderr)
+
+
 def run_replay(opts: ReplayOptions) -> int:
     """Replay a capture; returns the exit code.
 
@@ -271,11 +280,11 @@ def run_replay(opts: ReplayOptions) -> int:
         break  # one settings set for all feet (they were one session)
     rate_of = {u.foot: float(u.settings.get("rate_hz", 1000.0)) for u in info.units}
     windowed = opts.start_s > 0 or math.isfinite(opts.end_s)
-    print(
+    _say(
+        opts,
         f"replaying {opts.path} ({', '.join(f'{u.foot}: {u.port}' for u in info.units)}; "
         f"{summary.duration_s:.1f} s captured) at "
         f"{'max speed' if math.isinf(opts.speed) else f'{opts.speed:g}x'}" + window_note(opts),
-        file=sys.stderr,
     )
     lever_of = {
         u.foot: tuple(float(v) for v in u.settings["dual_imu_lever_b_m"])
@@ -301,11 +310,14 @@ def run_replay(opts: ReplayOptions) -> int:
         dual_runs=tuple(lever_of),
         tof=any(bool(u.settings.get("extensions", False)) for u in info.units),
     )
-    for note in notes:
-        print(note, file=sys.stderr)
+    _say(opts, *notes)
     realtime = opts.speed == 1.0
     status = StatusLine(feet=feet, stream=sys.stderr if realtime else io.StringIO())
-    progress = None if realtime else Progress(f"replay {opts.path.name}")
+    progress = (
+        Progress(f"replay {opts.path.name}")
+        if not realtime and (sys.stderr.isatty() or not opts.quiet)  # a step of export: on a terminal only
+        else None
+    )
     nav_config = cfg.nav_config()
     clock_origin: list[int] = []
     runs: list[FootRun] = []

@@ -360,7 +360,14 @@ def load_generic_csv(path: Path, mapping: CsvMapping | None = None) -> Recording
                 f"{path}: the first row is numbers, not a header; add a header row naming the columns "
                 f"(--columns names which is which)"
             )
-        raise InputFormatError(f"{path}: {noun} {', '.join(missing)} not found; the header has {', '.join(header)}")
+        found = f"{path}: {noun} {', '.join(missing)} not found; the header has {', '.join(header)}"
+        if len(header) == 1 and (sep := next((c for c in ";\t|" if c in header[0]), None)):
+            raise InputFormatError(
+                f"{path}: its columns are separated by {sep!r} (header {header[0]}); footnav reads comma-separated CSV"
+            )
+        if mapping is None:
+            raise InputFormatError(f"{found}; name its columns and units with --columns (the recordings guide)")
+        raise InputFormatError(found)
     data = _read_numeric_csv(path, skip=1, ncols=len(header))[:, [header.index(c) for c in wanted]]
     t = data[:, 0] * TIME_UNITS[m.time_unit]
     rate_hz = _nominal_rate(t, path)  # first: a bad first time stamp is named, never subtracted
@@ -473,6 +480,11 @@ def detect_format(path: Path) -> str:
         raise InputFormatError(f"cannot read {path}: {exc.strerror}") from None
     if head.startswith(b"MATLAB 5.0 MAT-file"):
         return "pyshoe"
+    if head.startswith(b"RRF"):
+        raise InputFormatError(
+            f"{path} is a Rerun recording (.rrd): footnav writes these, it does not navigate them; "
+            f"open it with `rerun {path}`"
+        )
     text = head.decode("latin-1")
     if "a_x [g]" in text or "Inertial data" in text:
         return "openshoe"
