@@ -313,6 +313,26 @@ def test_put_with_timeout_applies_backpressure_without_loss(tmp_path: Path) -> N
     assert tbl.to_arrow_table().num_rows == len(nav)
 
 
+def test_the_truth_error_is_thinned_on_the_sessions_samples_whatever_the_batches(tmp_path: Path) -> None:
+    """Every ``series_every``-th sample of the session, as the speed plot, not of each batch."""
+    path = tmp_path / "truth.rrd"
+    nav = synth_walk(1000, np.random.default_rng(3))
+    # no flush period, a pause between batches: the logger takes them one by one (mostly; it may join some)
+    logger = RerunLogger([rr.FileSink(str(path))], recording_id="truth", truth=True, series_every=10, flush_period_s=0)
+    with logger:
+        logger.log_truth(nav.pos_n_m + 0.01, t_s=nav.t_s)
+        for b in split(nav, 7):
+            assert logger.put(b, timeout_s=5.0)
+            time.sleep(0.002)
+    store = RrdReader(path).stream().collect()
+
+    def times(entity: str) -> list[int]:
+        return store.reader(index=TIMELINE, contents=[entity]).to_arrow_table()[TIMELINE].to_pylist()  # type: ignore[no-any-return]
+
+    paths = FootPaths()
+    assert len(times(paths.truth_error)) == 100 and times(paths.truth_error) == times(paths.speed)
+
+
 def test_two_feet_paths_and_unknown_foot(tmp_path: Path) -> None:
     path = tmp_path / "feet.rrd"
     nav = synth_walk(300, np.random.default_rng(5))

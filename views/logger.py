@@ -498,7 +498,7 @@ class RerunLogger:
         if nav.swing_clearance is not None:
             columns_list += convert.series_columns(paths.swing_clearance, *nav.swing_clearance)
         if (truth := self._truths.get(foot)) is not None:
-            every = slice(None, None, max(1, self._series_every))
+            every = slice((-first) % max(1, self._series_every), None, max(1, self._series_every))
             error = convert.horizontal_error_m(arrays.t_s[every], nav.pos_n_m[every], *truth)
             columns_list += convert.series_columns(paths.truth_error, arrays.t_s[every], error)
         for path, index, columns in columns_list:

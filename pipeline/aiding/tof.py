@@ -186,8 +186,8 @@ class TofAiding:
     ) -> tuple[int, float, float]:
         """Handle one reading at the current filter time ``t_s``; returns (code, measured height,
         innovation). The levels' heights must be read from ``x`` since the filter last ran
-        (:meth:`sync`, as the navigator does after each stretch of samples); an update here reads
-        them again itself."""
+        (:meth:`sync`, as the navigator does before each reading); an update here reads them again
+        itself."""
         cfg = self.config
         self.last_hit = None
         if not stance and self._in_stance:

@@ -86,10 +86,12 @@ def first_quiet_run(
     """Index of the first run of ``window`` samples :func:`quiet_samples` finds quiet, or −1.
 
     The search runs on prefixes of 8, 16, 32 ... windows. A sample's flag depends only on the samples
-    within one window of it, each summed in the same order (``numpy.convolve`` takes one dot product
-    per output), so on a prefix every flag more than a window before its end is the whole recording's,
-    bit for bit: a walk that starts still is decided on its first seconds, not by an O(n · window)
-    convolution of the whole recording, and a run found there is the first of the whole.
+    of the window centred on it, each summed in the same order (``numpy.convolve`` takes one dot product
+    per output), so on a prefix every flag whose window lies inside it is the whole recording's, bit for
+    bit: a walk that starts still is decided on its first seconds, not by an O(n · window) convolution
+    of the whole recording, and a run found there is the first of the whole. The last (window − 1) // 2
+    flags of the samples given are not used either: in a stream they change with the samples still to
+    come, and leaving them out makes the answer the same however the stream is cut into batches.
     """
     n = acc_b_mps2.shape[0]
     if n < window:  # (``numpy.convolve`` would return ``window`` values)
@@ -97,7 +99,7 @@ def first_quiet_run(
     length = min(n, 8 * window)
     while True:
         quiet = quiet_samples(acc_b_mps2[:length], gyr_b_radps[:length], window, max_rate_radps, max_acc_dev_mps2)
-        start = _first_run(quiet if length == n else quiet[: length - window], window)
+        start = _first_run(quiet[: length - (window - 1) // 2], window)
         if start >= 0 or length == n:
             return start
         length = min(n, 2 * length)

@@ -265,8 +265,9 @@ LEAD_IN_KEEP_S = 120.0
 """A live session keeps at most this much of its samples before the alignment, s (two minutes:
 120 000 samples, about 9 MB, at 1 kHz); earlier ones stay not navigated."""
 LEAD_IN_STILL_S = 10.0
-"""A live session fills its lead-in in at the latest this far into the still period, s: from the
-still period so far, when it lasts longer (the batch path takes the whole of it)."""
+"""A live session fills its lead-in in at the latest this far into the still period, s; a longer still
+period is taken to end one alignment window (``NavConfig.align_s``) before this (the batch path takes
+the whole of it)."""
 
 
 class LiveLeadIn:
@@ -343,9 +344,13 @@ class LiveLeadIn:
         end = still_period_end(
             batch.t_s, batch.acc_b_mps2, batch.gyr_b_radps, nav.rate_hz, nav.config, start, complete=complete
         )
-        if end is None and self._held - start < round(self.still_s * nav.rate_hz):
+        still_n = round(self.still_s * nav.rate_hz)
+        if end is None and self._held - start < still_n:
             return None
-        end = end if end is not None else self._held - max(2, round(nav.config.align_s * nav.rate_hz))
+        # at the latest a fixed number of samples into the still period (not where the samples held end,
+        # which depends on how the stream is cut into batches)
+        latest = start + still_n - max(2, round(nav.config.align_s * nav.rate_hz))
+        end = latest if end is None else min(end, latest)
         clipped = None if batch.gyr_clipped_b is None else batch.gyr_clipped_b[:end]
         assert self._forward is not None
         found = navigate_lead_in(

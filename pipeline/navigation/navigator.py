@@ -253,6 +253,7 @@ class Navigator:
         self._t_last = math.nan
         self._counters = np.zeros(eskf.N_CNT, dtype=np.int64)
         self._filter_state = eskf.new_filter_state()
+        self._last_still = True  # the last sample's stance (for a reading due before a batch): aligned still
         self._init_rate(rate_hz)
         self.level_updates: list[tuple[int, float]] | None = None
         """When a list: each stance height update, as (sample index since alignment, level height)."""
@@ -443,6 +444,7 @@ class Navigator:
         s.zero_rate_updates, s.zero_rate_rejected = int(c[eskf.CNT_ZARU]), int(c[eskf.CNT_ZARU_REJECTED])
         s.zero_velocity_rejected = int(c[eskf.CNT_ZUPT_REJECTED])
         s.samples_out += n
+        self._last_still = bool(still[-1])
         clearance = pos[:, 2].copy() if floor_c is None else pos[:, 2] - floor_c
         strides = self._strides.update(batch.t_s, clearance, still)
         altitude = None
@@ -522,7 +524,8 @@ class Navigator:
     ) -> tuple[F64, F64, RangeOutputs]:
         """The filter over ``batch`` with the due ToF readings applied at their times (class docstring);
         returns the floor height under the IMU per sample, the floor height the clearance is measured
-        from (``TofAiding.floor_under``) and what became of each reading."""
+        from (``TofAiding.floor_under``, with the levels' heights as of the last reading before the sample,
+        whatever the batches) and what became of each reading."""
         assert self._x is not None
         x, P, par, cnt = self._x, self._P, self._par, self._counters
         n = len(batch)
@@ -555,12 +558,12 @@ class Navigator:
                     cnt,
                     self._filter_state,
                 )
-                self.tof.sync(x)
                 floor_z[a:b], floor_c[a:b] = self.tof.floor_under(pos[a:b], still[a:b])
                 a = b
             if j < m:
+                self.tof.sync(x)
                 x, P = self._x, self._P = self.tof.reserve(x, P)
-                stance = bool(still[max(a - 1, 0)])
+                stance = bool(still[a - 1]) if a > 0 else self._last_still
                 codes[j], heights[j], innov[j] = self.tof.apply(
                     x, P, float(due.t_s[j]), int(due.sensor[j]), float(due.range_m[j]), int(due.status[j]), stance
                 )
