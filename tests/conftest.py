@@ -3,9 +3,16 @@
 from __future__ import annotations
 
 import shutil
+import signal
 from pathlib import Path
 
 import pytest
+
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    # A suite started as a background job of a shell without job control has Ctrl-C ignored, and its
+    # children inherit that: the tests that stop a command with SIGINT would wait for it forever. A
+    # handled signal is reset to its default in the children.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
