@@ -66,6 +66,17 @@ class StoredCalibration:
     calibration: ImuCalibration
     stream: str = ""
 
+    def document(self) -> dict[str, Any]:
+        """The file's content (what :func:`stored_calibration` reads back), as a capture keeps it."""
+        return {
+            "format": FORMAT,
+            "mcu_id": self.mcu_id,
+            "created_utc": self.created_utc,
+            "source": self.source,
+            "stream": self.stream,
+            "calibration": self.calibration.to_dict(),
+        }
+
     def describe(self) -> str:
         """One line for the terminal: which file, when, how good."""
         cal = self.calibration
@@ -123,11 +134,27 @@ def load_calibration(folder: Path, mcu_id: bytes) -> StoredCalibration | None:
         doc: Any = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, json.JSONDecodeError) as exc:
         raise CalibrationError(f"cannot read the calibration file {path}: {exc}") from exc
+    return stored_calibration(path, doc, mcu_id)
+
+
+def stored_calibration(path: Path, doc: Any, mcu_id: bytes) -> StoredCalibration:
+    """A calibration file's document ``doc`` (read from ``path``, or kept in a capture) for the unit ``mcu_id``.
+
+    Raises
+    ------
+    CalibrationError
+        ``doc`` is not a footnav calibration, or one of another unit (a file renamed or copied).
+    """
     if not isinstance(doc, dict) or doc.get("format") != FORMAT or not isinstance(doc.get("calibration"), dict):
         raise CalibrationError(f"{path} is not a footnav calibration file; remove it or run `footnav calibrate`")
+    if doc.get("mcu_id", mcu_id.hex()) != mcu_id.hex():
+        raise CalibrationError(
+            f"{path} is the calibration of another unit (MCU id {doc['mcu_id']}, not {mcu_id.hex()}): a file "
+            "renamed or copied; remove it, or calibrate this unit with `footnav calibrate`"
+        )
     return StoredCalibration(
         path=path,
-        mcu_id=str(doc.get("mcu_id", mcu_id.hex())),
+        mcu_id=mcu_id.hex(),
         created_utc=str(doc.get("created_utc", "?")),
         source=str(doc.get("source", "")),
         calibration=ImuCalibration.from_dict(doc["calibration"]),

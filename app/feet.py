@@ -285,6 +285,7 @@ def calibration_lookup(
                 "mcu_id",
                 mcu_id=None if mcu_id is None else mcu_id.hex(),
                 calibration=None if stored is None else str(stored.path),
+                calibration_document=None if stored is None else stored.document(),  # replay applies it
             )
 
     return CalibrationLookup(find=lambda mcu_id: load_calibration(folder, mcu_id), report=report)

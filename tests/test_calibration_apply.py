@@ -75,7 +75,12 @@ def test_calibration_applied_live_and_in_replay(tmp_path: Path, capsys: pytest.C
     # no calibration file anywhere: the unit is not even asked (sessions talk to it as before)
     assert protocol.CMD_MCU_ID not in tx_commands(cap_without)
 
-    for cfg, expected in ((config(tmp_path, cal_dir), nav_cal), (config(tmp_path, cal_dir, apply=False), None)):
+    runs = (
+        (config(tmp_path, cal_dir), nav_cal),
+        (config(tmp_path, tmp_path / "empty"), nav_cal),  # the capture keeps the calibration it applied
+        (config(tmp_path, cal_dir, apply=False), None),
+    )
+    for cfg, expected in runs:
         got, make = collector()
         assert run_replay(ReplayOptions(path=cap_with, config=cfg, viewer=False, collect=make)) == 0
         replayed = concat_batches(got)
@@ -85,6 +90,18 @@ def test_calibration_applied_live_and_in_replay(tmp_path: Path, capsys: pytest.C
         else:
             assert len(replayed) == len(nav_cal)
             assert not np.array_equal(replayed.pos_n_m, nav_cal.pos_n_m)
+
+
+def test_the_calibration_file_of_another_unit_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A file renamed or copied to this unit's name: its own MCU id says whose it is."""
+    cal_dir = tmp_path / "cal"
+    cal, _ = calibrate_emulated(Miscalibration(), grade="mpu6500x4", seed=3)
+    other = save_calibration(cal_dir, b"another unit", cal, source="test")
+    other.rename(cal_dir / f"{MISCALIBRATED_MCU_ID.hex()}.json")
+    _, err = walk(config(tmp_path, cal_dir))
+    said = capsys.readouterr().err
+    assert f"is the calibration of another unit (MCU id {b'another unit'.hex()}" in said and "applying" not in said
+    assert err > 0.15  # navigated uncalibrated
 
 
 def test_a_malformed_calibration_file_is_reported_and_the_session_goes_on(

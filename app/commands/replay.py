@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from footnav.app.calibration_store import StoredCalibration, calibration_dir, load_calibration
+from footnav.app.calibration_store import StoredCalibration, calibration_dir, load_calibration, stored_calibration
 from footnav.app.config import Config, apply_capture_settings
 from footnav.app.feet import (
     ONBOARD_INS_STATES,
@@ -45,6 +45,7 @@ from footnav.device.links.replay import CaptureReplayLink
 from footnav.device.modes import Mode
 from footnav.device.protocol.raw_imu import DUAL_IMU_MASK
 from footnav.device.unit import OpenShoeUnit
+from footnav.pipeline.calibration.model import CalibrationError
 from footnav.pipeline.dual_imu.navigator import DualNavigator
 from footnav.pipeline.errors import FootnavError, InputFormatError
 from footnav.pipeline.runner import NavSink
@@ -226,15 +227,28 @@ def captured_mode(settings: dict[str, Any], onboard: str | None, *, dual: bool) 
 
 
 def capture_calibration_lookup(summary: CaptureSummary, cfg: Config, foot: str) -> CalibrationLookup | None:
-    """The live session asked the unit its MCU id (an ``mcu_id`` event): ask again, from the capture."""
-    if not any(e.get("event") == "mcu_id" for e in summary.events.get(foot, [])):
+    """The live session asked the unit its MCU id (an ``mcu_id`` event): ask again, from the capture. The
+    calibration the session applied is the one the capture keeps (older captures: the file of that name)."""
+    asked = [e for e in summary.events.get(foot, []) if e.get("event") == "mcu_id"]
+    if not asked:
         return None
     folder = calibration_dir(cfg)
     apply = bool(cfg["calibration.apply"])
     prefix = f"{foot}: " if len(summary.info.feet) > 1 else ""
+    applied, document = asked[0].get("calibration"), asked[0].get("calibration_document")
 
     def find(mcu_id: bytes) -> StoredCalibration | None:
-        return load_calibration(folder, mcu_id) if apply else None
+        if not apply:
+            return None
+        if document is not None:
+            return stored_calibration(Path(str(applied)), document, mcu_id)
+        stored = load_calibration(folder, mcu_id)
+        if stored is None and applied is not None:
+            raise CalibrationError(
+                f"the live session applied the calibration {applied}, which this capture does not keep and "
+                f"{folder} does not hold: this replay differs from the session"
+            )
+        return stored
 
     def report(mcu_id: bytes | None, stored: StoredCalibration | None, note: str) -> None:
         if apply:
