@@ -372,6 +372,7 @@ def _show_config(args: argparse.Namespace) -> int:
 
 def _demo(args: argparse.Namespace) -> int:
     from footnav.app.commands.demo import DemoOptions, run_demo
+    from footnav.device.models import unit_model
 
     cfg = _config(args)
     return run_demo(
@@ -379,7 +380,7 @@ def _demo(args: argparse.Namespace) -> int:
             path=args.path,
             duration_s=args.duration,
             speed_mps=args.speed,
-            grade=args.grade or ("icm20948" if args.dual_imu else "mpu6500x4"),
+            grade=args.grade or ("icm20948" if args.dual_imu else unit_model(args.unit or "oblu").imu),
             axes=args.axis_errors or ("gyro-bias-calibrated" if args.tof and not args.miscalibrated else "none"),
             save=args.save,
             viewer=not args.no_viewer,

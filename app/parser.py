@@ -242,7 +242,7 @@ def _add_demo_command(sub: Commands) -> None:
         "--grade",
         choices=IMU_GRADES,
         default=None,
-        help="emulated sensor grade (default mpu6500x4; icm20948 with --dual-imu)",
+        help="emulated sensor grade (default mpu6500x4; icm20948 with --dual-imu; the unit's IMU with --unit)",
     )
     demo.add_argument(
         "--axis-errors",
@@ -260,10 +260,11 @@ def _add_demo_command(sub: Commands) -> None:
     demo.add_argument("--feet", type=int, choices=(1, 2), default=1, help="emulated shoes: 1, or 2 (left and right)")
     demo.add_argument(
         "--unit",
+        type=str.lower,
         choices=UNIT_MODELS,
         metavar="MODEL",
-        help=f"emulate a unit of this model ({', '.join(UNIT_MODELS)}: its base rate, command set and outputs) "
-        "and run `footnav live --unit MODEL` on it",
+        help=f"emulate a unit of this model ({', '.join(UNIT_MODELS)}: its base rate, command set, outputs and "
+        "IMU) and run `footnav live --unit MODEL` on it",
     )
     demo.add_argument(
         "--mode",
@@ -326,10 +327,11 @@ def _add_live_command(sub: Commands) -> None:
     )
     live.add_argument(
         "--unit",
+        type=str.lower,
         choices=UNIT_MODELS,
         metavar="MODEL",
-        help=f"the unit's model: {', '.join(UNIT_MODELS)} (sets its base rate and the modes it offers; "
-        "default: a 1 kHz unit, its firmware probed)",
+        help=f"the unit's model: {', '.join(UNIT_MODELS)} (sets its base rate, the modes it offers and its IMU's "
+        "profile; default: a 1 kHz unit, its firmware probed)",
     )
     live.add_argument(
         "--mode",

@@ -40,6 +40,9 @@ class UnitModel:
         IMUs on the board (the raw output's mask has this many bits).
     outputs
         what its firmware streams, of :data:`OUTPUTS`, best first (the default is the first).
+    imu
+        its IMU: the navigation profile (``footnav.pipeline.navigation.profiles``) and the emulated
+        sensor grade of that name.
     """
 
     name: str
@@ -48,6 +51,7 @@ class UnitModel:
     command_set: CommandSet
     imus: int
     outputs: tuple[str, ...]
+    imu: str = "mpu6500x4"
 
     @property
     def default_output(self) -> str:
@@ -69,7 +73,7 @@ UNIT_MODELS: Final[dict[str, UnitModel]] = {
         UnitModel("mimu22bl", "GT Silicon MIMU22BL", 1000.0, CommandSet.V2015, 4, OUTPUTS),
         UnitModel("mimu4444", "GT Silicon MIMU4444", 250.0, CommandSet.V2015, 4, OUTPUTS),
         UnitModel("mimu22bt", "GT Silicon MIMU22BT (2014 firmware)", 1000.0, CommandSet.V2014, 4, ("steps",)),
-        UnitModel("openshoe", "OpenShoe (ADIS16367)", 819.2, CommandSet.V2015, 1, ("imu", "ins", "steps")),
+        UnitModel("openshoe", "OpenShoe (ADIS16367)", 819.2, CommandSet.V2015, 1, ("imu", "ins", "steps"), "adis16367"),
     )
 }
 """The known models by name."""

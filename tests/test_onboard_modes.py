@@ -210,7 +210,12 @@ async def test_a_2014_unit_is_resumed_with_its_own_stepwise_start_after_a_replug
 
 @pytest.mark.parametrize(
     ("model", "mode", "shown"),
-    [("mimu22bt", "auto", "stepwise packets"), ("oblu", "ins", "estimates"), ("mimu22bl", "raw", "estimates")],
+    [
+        ("mimu22bt", "auto", "stepwise packets"),
+        ("oblu", "ins", "estimates"),
+        ("mimu22bl", "raw", "estimates"),
+        ("OpenShoe", "auto", "estimates"),  # any case; an ADIS16367 emulated and navigated with its profile
+    ],
 )
 def test_demo_runs_live_against_an_emulated_unit_of_the_model(
     tmp_path: Path, model: str, mode: str, shown: str
@@ -236,8 +241,13 @@ def test_demo_runs_live_against_an_emulated_unit_of_the_model(
     assert steps.num_rows > 5
     capture = next(tmp_path.glob("*.mcap"))
     settings = read_capture_info(capture).units[0].settings
-    assert settings["model"] == model
-    assert settings["mode"] == {"auto": "steps", "ins": "ins", "raw": "raw_imu_fused"}[mode]
+    assert settings["model"] == model.lower()
+    expected_mode = {"auto": "normal_imu" if model == "OpenShoe" else "steps", "ins": "ins", "raw": "raw_imu_fused"}[
+        mode
+    ]
+    assert settings["mode"] == expected_mode
+    imu = "adis16367" if model == "OpenShoe" else "mpu6500x4"
+    assert settings["nav_config"]["profile"]["name"] == imu and f"command set, {imu})" in proc.stderr
     export = subprocess.run(
         [sys.executable, "-m", "footnav.app", "export", str(capture), "-o", str(tmp_path / "t.csv"),
          "--steps", str(tmp_path / "s.csv")],

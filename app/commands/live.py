@@ -218,10 +218,20 @@ def run_live(opts: LiveOptions) -> int:
         return 130  # the shell's code for a command ended by Ctrl-C (SIGINT)
 
 
+def _model(opts: LiveOptions) -> UnitModel:
+    """The unit's model (``--unit``); its IMU's profile unless the configuration names one."""
+    if opts.model is None:
+        return DEFAULT_MODEL
+    model = unit_model(opts.model)
+    if opts.config.source("unit.profile") == DEFAULT:
+        opts.config.set("unit.profile", model.imu, f"--unit {model.name}")
+    return model
+
+
 async def live_session(opts: LiveOptions) -> int:
     """:func:`run_live` on the running event loop (cancel it to stop, as Ctrl-C does)."""
     cfg = opts.config
-    model = DEFAULT_MODEL if opts.model is None else unit_model(opts.model)
+    model = _model(opts)
     output = choose_output(opts, model)
     rate_divider = int(cfg["unit.rate_divider"])
     top = model.max_rate_divider(output)
