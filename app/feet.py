@@ -463,13 +463,13 @@ async def run_feet(
         await asyncio.gather(*(one(r) for r in runs))
     finally:
         trimmer.cancel()
+    errors = [r.error for r in runs if r.error is not None]
+    if errors and len(errors) == len(runs):
+        raise errors[0] if isinstance(errors[0], FootnavError) else DeviceError(str(errors[0]))
     if lockstep is not None:
         print(lockstep.summary())
     elif len(runs) == 2:
         print("feet independent: each foot navigated on its own")
-    errors = [r.error for r in runs if r.error is not None]
-    if errors and len(errors) == len(runs):
-        raise errors[0] if isinstance(errors[0], FootnavError) else DeviceError(str(errors[0]))
 
 
 def finish_capture(capture: CaptureWriter | None, runs: Sequence[FootRun]) -> None:

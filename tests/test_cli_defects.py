@@ -239,6 +239,21 @@ def test_a_csv_without_the_default_columns_says_how_to_read_it(tmp_path: Path) -
         load_recording(path)
 
 
+def test_a_live_session_that_never_got_data_leaves_no_empty_recording(tmp_path: Path) -> None:
+    """Without a display the session saves to a default file; no unit answered: it is removed, and two
+    failed feet print no coupling summary."""
+    env = {**os.environ, "DISPLAY": "", "WAYLAND_DISPLAY": ""}
+    for ports in (["--port", "/dev/ttyNOPE42"], ["--left", "/dev/ttyNOPE42", "--right", "/dev/ttyNOPE43"]):
+        proc = subprocess.run(
+            [sys.executable, "-m", "footnav.app", "live", *ports, "--sessions", str(tmp_path / "s")],
+            capture_output=True, text=True, timeout=60, env=env, cwd=tmp_path, check=False,
+        )  # fmt: skip
+        _assert_one_line_error(proc, "/dev/ttyNOPE42", "plugged in")
+        assert "saving to" in proc.stderr and "the empty recording" in proc.stderr
+        assert list(tmp_path.glob("*.rrd")) == [] and list((tmp_path / "s").glob("*.mcap")) == []
+        assert "feet coupled" not in proc.stdout
+
+
 def test_a_rerun_recording_is_told_apart_from_a_recording_to_navigate(tmp_path: Path) -> None:
     import rerun as rr
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -364,14 +364,25 @@ async def live_session(opts: LiveOptions) -> int:
     finally:
         status.finish()
         finish_capture(capture, runs)
-        if views is not None:
-            for note in views.close():
-                notice(note)
+        _close_views(views, opts, runs)
         close_lsl_outlets(lsl)
         for run in runs:
             if run.result.samples_received:
                 print((f"{run.foot}: " if two_feet else "") + link_summary(run))
     return 0
+
+
+def _close_views(views: SessionViews | None, opts: LiveOptions, runs: Sequence[FootRun]) -> None:
+    """Close the session's outputs; a recording file nobody asked for (no ``--save``) is removed when
+    no unit sent a sample."""
+    if views is None:
+        return
+    for note in views.close():
+        notice(note)
+    if opts.save is None and not any(run.result.samples_received for run in runs):
+        for path in (out.path for out in views.outputs if out.path is not None):
+            path.unlink(missing_ok=True)
+            notice(f"no unit sent data: the empty recording {path} was removed")
 
 
 def _foot_line(run: FootRun, addresses: dict[str, UnitAddress], model: UnitModel) -> str:
