@@ -465,6 +465,8 @@ def export_capture(
     KeyboardInterrupt
         the replay was interrupted (Ctrl-C): nothing written.
     """
+    if steps_out is not None or gait_out is not None:
+        _check_samples_captured(source)
     if smooth:
         from footnav.app.commands.smooth_capture import smooth_capture
 
@@ -490,6 +492,25 @@ def export_capture(
             label = f" {foot}" if len(navs) > 1 else ""
             gait.append(export_gait(nav, gpath, causal_from=None if smooth else 0, label=label))
     return f"wrote {'; '.join(written)} (footnav capture, {how})" + "".join(f"\n{g}" for g in gait)
+
+
+def _check_samples_captured(source: Path) -> None:
+    """``--steps`` and ``--gait`` find the steps in a navigated walk; a unit's stepwise output has none to find.
+
+    Raises
+    ------
+    FootnavError
+        a foot of the capture sent the unit's own steps.
+    """
+    from footnav.app.commands.replay import ReplayOptions, checked_summary, onboard_outputs
+    from footnav.app.config import defaults
+
+    summary = checked_summary(ReplayOptions(path=source, config=defaults(), viewer=False))
+    if "steps" in onboard_outputs(summary).values():
+        raise FootnavError(
+            f"{source} holds the unit's own steps (stepwise dead reckoning), not its samples: --steps and --gait "
+            "find the steps of a navigated walk; the track file alone has one row per step"
+        )
 
 
 def foot_path(path: Path, foot: str) -> Path:
