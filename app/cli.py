@@ -399,6 +399,7 @@ def _demo(args: argparse.Namespace) -> int:
             stance=args.stance,
             unit=args.unit,
             mode=args.mode,
+            imu_mask=args.imu_mask,
             lsl=_lsl(args),
             feet_coupling=_feet_coupling_or_default(args, two_feet=args.feet == 2),
         )

@@ -272,6 +272,14 @@ def _add_demo_command(sub: Commands) -> None:
         default="auto",
         help="with --unit: the output `live --mode` asks the emulated unit for (default: the best it offers)",
     )
+    demo.add_argument(
+        "--rate-divider", type=int, default=None, choices=range(15), metavar="K",
+        help="with --unit: the rate divider `live --rate-divider` asks the emulated unit for",
+    )  # fmt: skip
+    demo.add_argument(
+        "--imu-mask", type=_imu_mask, default=None, metavar="MASK",
+        help="with --unit --mode raw: the IMUs the emulated unit streams and footnav averages (as live --imu-mask)",
+    )  # fmt: skip
     demo.add_argument("--pace", type=_pace, default=1.0, metavar="1x|Nx|max", help="emulator speed (default real time)")
     demo.add_argument("--seed", type=_seed, default=1, help="random seed of the emulated sensor errors")
     demo.add_argument(

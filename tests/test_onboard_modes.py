@@ -258,3 +258,28 @@ def test_demo_runs_live_against_an_emulated_unit_of_the_model(
         assert not (tmp_path / "s.csv").exists()
         return
     assert export.returncode == 0 and "Traceback" not in export.stderr, export.stderr
+
+
+def test_demo_asks_the_emulated_unit_for_a_rate_divider_and_imu_mask(tmp_path: Path) -> None:
+    """``demo --unit`` takes ``live``'s ``--rate-divider`` and ``--imu-mask`` (and refuses them without it)."""
+    import subprocess
+    import sys
+
+    def demo(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, "-m", "footnav.app", "demo", *args, "--duration", "8", "--pace", "max",
+             "--no-viewer", "--sessions", str(tmp_path)],
+            capture_output=True, text=True, timeout=300, check=False,
+        )  # fmt: skip
+
+    proc = demo("--unit", "mimu22bl", "--mode", "raw", "--imu-mask", "0x3", "--rate-divider", "1")
+    assert proc.returncode == 0, proc.stderr
+    settings = read_capture_info(next(tmp_path.glob("*.mcap"))).units[0].settings
+    assert settings["fused_imu_mask"] == 0x3 and settings["rate_divider_log2"] == 1
+    assert "4000 estimates received" in proc.stdout  # 8 s at 500 Hz
+    for args, said in (
+        (("--rate-divider", "1"), "need --unit MODEL"),
+        (("--unit", "oblu", "--imu-mask", "3"), "--imu-mask applies to --mode raw"),
+    ):
+        proc = demo(*args)
+        assert proc.returncode == 2 and said in proc.stderr, proc.stderr

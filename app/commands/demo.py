@@ -126,7 +126,9 @@ class DemoOptions:
     """Emulate this unit model (``footnav.device.models``) and run ``footnav live`` on it
     (:mod:`footnav.app.commands.demo_unit`); one foot."""
     mode: str = "auto"
-    """With ``unit``: the output ``live --mode`` asks for."""
+    """With ``unit``: the output ``live --mode`` asks for (its rate divider is ``unit.rate_divider``)."""
+    imu_mask: int | None = None
+    """With ``unit`` and ``mode`` raw: the IMUs streamed and averaged (None: all of the unit's)."""
     lsl: LslRequest | None = None
     """``--lsl``: the estimates on Lab Streaming Layer too (:mod:`footnav.views.lsl`), as from a unit
     named ``emulator``."""
@@ -301,11 +303,17 @@ def check_options(opts: DemoOptions) -> None:
         raise FootnavError("the miscalibrated unit has its own scale and misalignment errors; drop --axis-errors")
     if opts.unit is not None and (opts.feet != 1 or opts.dual_imu or opts.tof or opts.miscalibrated):
         raise FootnavError("--unit emulates one unit of that model: drop --feet 2, --dual-imu, --tof, --miscalibrated")
-    if opts.unit is None and opts.mode != "auto":
-        raise FootnavError("--mode needs --unit MODEL (the unit whose output it asks for)")
+    if opts.unit is None and (opts.mode != "auto" or opts.imu_mask is not None or _rate_divider_given(opts)):
+        raise FootnavError("--mode, --rate-divider and --imu-mask need --unit MODEL (the unit they ask)")
+    if opts.imu_mask is not None and opts.mode != "raw":
+        raise FootnavError("--imu-mask applies to --mode raw (the IMUs to stream and average)")
     lo, hi = SPEED_RANGE_MPS
     if not lo <= opts.speed_mps <= hi:
         raise FootnavError(f"walking speed {opts.speed_mps:g} m/s: the emulated gait covers {lo} to {hi} m/s")
+
+
+def _rate_divider_given(opts: DemoOptions) -> bool:
+    return opts.config is not None and opts.config.source("unit.rate_divider") != DEFAULT
 
 
 def emulated_servers(
@@ -554,6 +562,7 @@ def _unit_demo(opts: DemoOptions) -> int:
             keep_web=opts.keep_web,
             capture=opts.capture,
             lsl=lsl,
+            fused_imu_mask=opts.imu_mask,
         )
 
     return run_unit_demo(
