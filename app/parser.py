@@ -118,12 +118,10 @@ def _imu_mask(text: str) -> int:
 def _add_stance_arg(p: argparse.ArgumentParser, *, default: str | None) -> None:
     """``--stance``: the zero-velocity detector of ToF units (``footnav.pipeline.stance.height_detector``)."""
     p.add_argument(
-        "--stance",
-        choices=("inertial", "height", "and", "or"),
-        default=default,
+        "--stance", choices=("inertial", "height", "and", "or"), default=default,
         help="ToF units: stance from the inertial detector, from the foot's height and angular rate, "
         "or both (and/or); default: inertial" + ("" if default else ", or as recorded"),
-    )
+    )  # fmt: skip
 
 
 def _add_config_args(p: argparse.ArgumentParser, *, profile: bool = True) -> None:
@@ -131,20 +129,14 @@ def _add_config_args(p: argparse.ArgumentParser, *, profile: bool = True) -> Non
         "--config", type=Path, metavar="FILE", help="configuration file (default: ./footnav.toml if present)"
     )
     if profile:
-        p.add_argument(
-            "--profile",
-            metavar="NAME",
-            help=f"unit noise profile: {', '.join(PROFILES)} or [profiles.NAME]",
-        )
+        p.add_argument("--profile", metavar="NAME", help=f"unit noise profile: {', '.join(PROFILES)}, [profiles.NAME]")
 
 
 def _add_step_smoothing_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument(
-        "--step-smoothing",
-        action="store_true",
-        default=None,
+        "--step-smoothing", action="store_true", default=None,
         help="also show each step smoothed once it has ended ([filter] step_smoothing)",
-    )
+    )  # fmt: skip
 
 
 def _add_feet_coupling_args(p: argparse.ArgumentParser, *, default: str) -> argparse._ArgumentGroup:

@@ -100,6 +100,26 @@ def test_tof_aiding_on_stairs_whatever_the_batches(stairs: tuple[ImuBatch, Range
     assert_same(run(None), run(size))
 
 
+def test_a_reading_at_a_batchs_start_takes_the_previous_samples_stance() -> None:
+    """The ``and`` detector (inertial and height): a reading due before a batch's first sample is
+    applied with the stance of the sample before it, not of the batch's first."""
+    rec = tof_experiment.record("line", 40.0, seed=1)
+    imu = imu_batch(rec.acc_b_mps2, rec.gyr_b_radps)
+    cfg = TofConfig()
+    tof = dataclasses.replace(cfg, detector=dataclasses.replace(cfg.detector, mode="and"))
+
+    def run(size: int | None) -> list[NavBatch]:
+        nav, out = Navigator(NavConfig(), RATE_HZ, tof=tof), []
+        for part, readings in _reads(imu, rec.ranges, size):
+            if len(readings.t_s):
+                nav.add_ranges(readings)
+            if (got := nav.process(part)) is not None:
+                out.append(got)
+        return out
+
+    assert_same(run(None), run(2))
+
+
 def test_tof_aiding_live_reads_equal_the_replays_joined_reads(stairs: tuple[ImuBatch, RangeBatch]) -> None:
     """Live, readings arrive after the samples of their read; a full-speed replay joins reads without
     readings into one batch (``footnav.device.links.capture_replay``). Some reads carry no reading."""
@@ -185,3 +205,18 @@ def test_a_lead_in_before_a_long_still_period_whatever_the_batches() -> None:
         other_forward, other_filled = run(size)
         assert_same(forward, other_forward)
         assert_same(filled, other_filled)
+
+
+def test_a_whole_recording_aligns_on_a_short_still_period_at_its_end() -> None:
+    """``navigate`` on whole arrays: the quiet flags at the recording's end are final, and a stream's
+    caution (its last half window) does not apply: 0.7 s of rest after 3 s of motion is enough."""
+    from footnav.pipeline.navigation.navigator import navigate
+
+    rng = np.random.default_rng(0)
+    gravity = np.array([0.0, 0.0, 9.81])
+    acc = np.vstack([gravity + rng.normal(0, 5.0, (3000, 3)), gravity + rng.normal(0, 0.02, (700, 3))])
+    gyr = np.vstack([rng.normal(0, 3.0, (3000, 3)), rng.normal(0, 0.005, (700, 3))])
+    nav, _ = navigate(np.arange(3700) / RATE_HZ, acc, gyr, RATE_HZ)
+    assert nav is not None and 0 < len(nav.t_s) < 700
+    streamed = _stream(lambda: Navigator(NavConfig(), RATE_HZ), imu_batch(acc, gyr), 100)
+    assert streamed == []  # a stream does not know its last samples are its last

@@ -277,6 +277,9 @@ def test_demo_asks_the_emulated_unit_for_a_rate_divider_and_imu_mask(tmp_path: P
     settings = read_capture_info(next(tmp_path.glob("*.mcap"))).units[0].settings
     assert settings["fused_imu_mask"] == 0x3 and settings["rate_divider_log2"] == 1
     assert "4000 estimates received" in proc.stdout  # 8 s at 500 Hz
+    config = tmp_path / "footnav.toml"
+    config.write_text("[unit]\nrate_divider = 2\n")  # for live sessions; the built-in demo is not asked
+    assert demo("--config", str(config)).returncode == 0
     for args, said in (
         (("--rate-divider", "1"), "need --unit MODEL"),
         (("--unit", "oblu", "--imu-mask", "3"), "--imu-mask applies to --mode raw"),

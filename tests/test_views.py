@@ -331,6 +331,7 @@ def test_the_truth_error_is_thinned_on_the_sessions_samples_whatever_the_batches
 
     paths = FootPaths()
     assert len(times(paths.truth_error)) == 100 and times(paths.truth_error) == times(paths.speed)
+    assert logger.stats.sends > 10  # the batches were logged apart (else this would test nothing)
 
 
 def test_two_feet_paths_and_unknown_foot(tmp_path: Path) -> None:
@@ -393,9 +394,9 @@ def test_without_a_display_the_session_is_saved_and_says_how_to_open_it(
 
 def test_the_hint_names_the_rerun_of_this_install(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Without the environment activated ``rerun`` is not on PATH: the hint gives the command's path."""
-    from footnav.views.sinks import open_hint, rerun_command
+    from footnav.views.sinks import open_hint, rerun_command, rerun_script
 
-    exe = Path(sys.executable).parent / ("rerun.exe" if sys.platform == "win32" else "rerun")
+    exe = rerun_script()
     assert exe.is_file()  # installed with rerun-sdk
     monkeypatch.setenv("PATH", str(exe.parent))
     assert rerun_command() == "rerun"

@@ -20,6 +20,7 @@ import signal
 import socket
 import subprocess
 import sys
+import sysconfig
 import time
 from collections.abc import Mapping
 from datetime import datetime
@@ -351,26 +352,37 @@ def check_writable(path: Path) -> str | None:
 
 
 def default_save_path(now: datetime | None = None, directory: Path | None = None) -> Path:
-    """``footnav-YYYYmmdd-HHMMSS.rrd`` in ``directory`` (default: the working directory)."""
+    """``footnav-YYYYmmdd-HHMMSS.rrd`` in ``directory`` (default: the working directory); ``-2``, ``-3`` ...
+    before the suffix when a file of that name exists (another session of the same second)."""
     stamp = (now or datetime.now()).strftime("%Y%m%d-%H%M%S")
-    return (directory or Path.cwd()) / f"footnav-{stamp}.rrd"
+    folder = directory or Path.cwd()
+    path, k = folder / f"footnav-{stamp}.rrd", 1
+    while path.exists():
+        k += 1
+        path = folder / f"footnav-{stamp}-{k}.rrd"
+    return path
 
 
 def rerun_command() -> str:
     """How to call the ``rerun`` command of this install: ``rerun`` when it is the one on ``PATH``,
     else its path (relative to the working directory when inside it, e.g. ``.venv/bin/rerun``)."""
-    exe = Path(sys.executable).parent / ("rerun.exe" if sys.platform == "win32" else "rerun")
+    exe = rerun_script()
     found = shutil.which("rerun")
     if not exe.is_file() or (found is not None and Path(found).resolve() == exe.resolve()):
         return "rerun"
     return _shown(exe)
 
 
+def rerun_script() -> Path:
+    """Where this install's ``rerun`` command is (the environment's scripts folder)."""
+    return Path(sysconfig.get_path("scripts")) / ("rerun.exe" if sys.platform == "win32" else "rerun")
+
+
 def _shown(path: Path) -> str:
-    """``path`` quoted for a shell, relative to the working directory when inside it."""
+    """``path`` quoted for the shell (``cmd`` on Windows), relative to the working directory when inside it."""
     with contextlib.suppress(ValueError):
-        return shlex.quote(str(path.absolute().relative_to(Path.cwd())))
-    return shlex.quote(str(path))
+        path = path.absolute().relative_to(Path.cwd())
+    return subprocess.list2cmdline([str(path)]) if sys.platform == "win32" else shlex.quote(str(path))
 
 
 def open_hint(path: Path, environ: Mapping[str, str] | None = None) -> str:

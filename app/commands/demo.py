@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from footnav.app import heap
 from footnav.app.choices import PATHS
-from footnav.app.config import DEFAULT, Config, defaults
+from footnav.app.config import CLI, DEFAULT, Config, defaults
 from footnav.app.feet import (
     FOOT_START_OFFSET_M,
     FootRun,
@@ -313,7 +313,7 @@ def check_options(opts: DemoOptions) -> None:
 
 
 def _rate_divider_given(opts: DemoOptions) -> bool:
-    return opts.config is not None and opts.config.source("unit.rate_divider") != DEFAULT
+    return opts.config is not None and opts.config.source("unit.rate_divider") == CLI
 
 
 def emulated_servers(

@@ -96,6 +96,7 @@ class TofAiding:
         self._res = np.zeros(tu.N_RES)
         self.counts = TofCounts()
         self.levels_z_m: list[float] = [0.0]
+        """Height of each known level, m, as the filter had it at the last reading (:meth:`sync`)."""
         self._level_state: list[int] = [-1]
         """Per level, its error-state index in the filter (−1: not a state; the start floor, z = 0 by
         definition of the frame, never is)."""

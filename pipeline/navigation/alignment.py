@@ -81,7 +81,13 @@ def quiet_samples(
 
 
 def first_quiet_run(
-    acc_b_mps2: F64, gyr_b_radps: F64, window: int, max_rate_radps: float, max_acc_dev_mps2: float
+    acc_b_mps2: F64,
+    gyr_b_radps: F64,
+    window: int,
+    max_rate_radps: float,
+    max_acc_dev_mps2: float,
+    *,
+    complete: bool = False,
 ) -> int:
     """Index of the first run of ``window`` samples :func:`quiet_samples` finds quiet, or −1.
 
@@ -90,8 +96,9 @@ def first_quiet_run(
     per output), so on a prefix every flag whose window lies inside it is the whole recording's, bit for
     bit: a walk that starts still is decided on its first seconds, not by an O(n · window) convolution
     of the whole recording, and a run found there is the first of the whole. The last (window − 1) // 2
-    flags of the samples given are not used either: in a stream they change with the samples still to
-    come, and leaving them out makes the answer the same however the stream is cut into batches.
+    flags of the samples given are not used either, unless they are the whole recording (``complete``):
+    in a stream they change with the samples still to come, and leaving them out makes the answer the
+    same however the stream is cut into batches.
     """
     n = acc_b_mps2.shape[0]
     if n < window:  # (``numpy.convolve`` would return ``window`` values)
@@ -99,7 +106,7 @@ def first_quiet_run(
     length = min(n, 8 * window)
     while True:
         quiet = quiet_samples(acc_b_mps2[:length], gyr_b_radps[:length], window, max_rate_radps, max_acc_dev_mps2)
-        start = _first_run(quiet[: length - (window - 1) // 2], window)
+        start = _first_run(quiet if complete and length == n else quiet[: length - (window - 1) // 2], window)
         if start >= 0 or length == n:
             return start
         length = min(n, 2 * length)

@@ -265,9 +265,8 @@ LEAD_IN_KEEP_S = 120.0
 """A live session keeps at most this much of its samples before the alignment, s (two minutes:
 120 000 samples, about 9 MB, at 1 kHz); earlier ones stay not navigated."""
 LEAD_IN_STILL_S = 10.0
-"""A live session fills its lead-in in at the latest this far into the still period, s; a longer still
-period is taken to end one alignment window (``NavConfig.align_s``) before this (the batch path takes
-the whole of it)."""
+"""A live session fills its lead-in in at the latest this far into the still period, s: a longer still
+period is taken to end there (the batch path takes the whole of it)."""
 
 
 class LiveLeadIn:
@@ -344,12 +343,12 @@ class LiveLeadIn:
         end = still_period_end(
             batch.t_s, batch.acc_b_mps2, batch.gyr_b_radps, nav.rate_hz, nav.config, start, complete=complete
         )
-        still_n = round(self.still_s * nav.rate_hz)
-        if end is None and self._held - start < still_n:
+        # at the latest ``still_s`` into the still period (not where the samples held end, which depends on
+        # how the stream is cut into batches), once the flags up to there are decided
+        latest = start + round(self.still_s * nav.rate_hz)
+        need = max(2, round(nav.config.align_s * nav.rate_hz))
+        if end is None and self._held < latest + need:
             return None
-        # at the latest a fixed number of samples into the still period (not where the samples held end,
-        # which depends on how the stream is cut into batches)
-        latest = start + still_n - max(2, round(nav.config.align_s * nav.rate_hz))
         end = latest if end is None else min(end, latest)
         clipped = None if batch.gyr_clipped_b is None else batch.gyr_clipped_b[:end]
         assert self._forward is not None

@@ -254,6 +254,7 @@ class Navigator:
         self._counters = np.zeros(eskf.N_CNT, dtype=np.int64)
         self._filter_state = eskf.new_filter_state()
         self._last_still = True  # the last sample's stance (for a reading due before a batch): aligned still
+        self.whole_recording = False  # one batch holds the whole recording: its last quiet flags are final
         self._init_rate(rate_hz)
         self.level_updates: list[tuple[int, float]] | None = None
         """When a list: each stance height update, as (sample index since alignment, level height)."""
@@ -378,11 +379,9 @@ class Navigator:
         stat = np.concatenate([s for _, s, _, _ in self._pending])
         threshold = np.concatenate([t for _, _, t, _ in self._pending])
         still = np.concatenate([z for _, _, _, z in self._pending])
-        need = max(2, round(self.config.align_s * self.rate_hz))
         cfg = self.config
-        start = first_quiet_run(
-            batch.acc_b_mps2, batch.gyr_b_radps, need, cfg.align_max_rate_radps, cfg.align_max_acc_dev_mps2
-        )
+        need, limits = max(2, round(cfg.align_s * self.rate_hz)), (cfg.align_max_rate_radps, cfg.align_max_acc_dev_mps2)
+        start = first_quiet_run(batch.acc_b_mps2, batch.gyr_b_radps, need, *limits, complete=self.whole_recording)
         if start < 0:
             keep = round(self.config.max_wait_s * self.rate_hz)
             if len(batch) > keep:  # bound memory while the unit never rests
@@ -591,6 +590,7 @@ def navigate(
     when given, and the rates marked clipped in ``gyr_clipped_b`` (n, 3)
     (``footnav.pipeline.navigation.saturation``)."""
     nav = Navigator(config or NavConfig(), rate_hz, tof=tof)
+    nav.whole_recording = True
     if ranges is not None:
         nav.add_ranges(ranges)
     n = t_s.shape[0]

@@ -483,6 +483,7 @@ def smooth_recording(
     if segment_samples < 1:
         raise ValueError("segment_samples must be at least 1")
     nav = _CheckpointingNavigator(config or NavConfig(), rate_hz, segment_samples)
+    nav.whole_recording = True
     n_in = t_s.shape[0]
     out = nav.process(
         ImuBatch(

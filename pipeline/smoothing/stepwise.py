@@ -289,6 +289,7 @@ def step_smooth_recording(
     ``navigator.navigate`` on the same arrays; positions, velocities, attitude, ``cov_pos_yaw``,
     ``pos_cov_n_m2`` and ``clearance_m`` are the step-smoothed ones."""
     nav = StepSmoothingNavigator(config or NavConfig(), rate_hz, with_covariance=True)
+    nav.whole_recording = True
     n = t_s.shape[0]
     out = nav.process(
         ImuBatch(t_s, acc_b_mps2, gyr_b_radps, np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64), gyr_clipped_b)
