@@ -13,13 +13,12 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import pytest
 from footnav.app.experiments import tof as tof_experiment
-from footnav.device.emulator.motion.gait import simulate_walk
-from footnav.device.emulator.sensors.imu_errors import corrupt
 from footnav.pipeline.aiding.tof_types import RangeBatch, TofConfig
 from footnav.pipeline.nav_types import NavBatch
 from footnav.pipeline.navigation.lead_in import LiveLeadIn
 from footnav.pipeline.navigation.navigator import NavConfig, Navigator
 from footnav.pipeline.samples import ImuBatch
+from test_lead_in_live import walk_then_rest
 
 RATE_HZ = 1000.0
 
@@ -176,15 +175,7 @@ def test_alignment_on_a_short_pause_whatever_the_batches(pause_samples: int) -> 
 def test_a_lead_in_before_a_long_still_period_whatever_the_batches() -> None:
     """Six strides, then 14 s still (longer than ``LEAD_IN_STILL_S``), then a walk: the backward run
     starts at a fixed point of the still period, not where the samples held at the check end."""
-    first = simulate_walk("rectangle", 22.0, rate_hz=RATE_HZ, seed=2, initial_still_s=0.0, max_strides=6)
-    second = simulate_walk("rectangle", 6.0, rate_hz=RATE_HZ, seed=5, initial_still_s=1.0)
-    acc, gyr, _ = corrupt(
-        np.vstack([first.acc_b_mps2, second.acc_b_mps2]),
-        np.vstack([first.gyr_b_radps, second.gyr_b_radps]),
-        RATE_HZ,
-        "mpu6500x4",
-        seed=3,
-    )
+    _, acc, gyr = walk_then_rest(22.0, 6, 6.0, 1.0)
     imu = imu_batch(acc, gyr)
 
     def run(size: int | None) -> tuple[list[NavBatch], list[NavBatch]]:

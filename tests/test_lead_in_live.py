@@ -49,12 +49,14 @@ def assert_same(a: NavBatch, b: NavBatch) -> None:
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)  # bit for bit
 
 
-@pytest.fixture(scope="module")
-def walk_rest_walk() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """8 strides from mid-motion, a rest of about 7 s, then a second walk: the first still period lies
-    between the two walks (the foot stands level at rest, so the body-frame signals join)."""
-    first = simulate_walk("rectangle", 14.0, rate_hz=RATE_HZ, seed=2, initial_still_s=0.0, max_strides=8)
-    second = simulate_walk("rectangle", 10.0, rate_hz=RATE_HZ, seed=5, initial_still_s=1.5)
+def walk_then_rest(
+    first_s: float, strides: int, second_s: float, second_still_s: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``strides`` strides from mid-motion, rest until ``first_s``, then a walk of ``second_s`` that starts
+    with ``second_still_s`` still: the first still period lies between the two walks (the foot stands level
+    at rest, so the body-frame signals join). Times (n,) s, specific force and rate (n, 3), 1 kHz."""
+    first = simulate_walk("rectangle", first_s, rate_hz=RATE_HZ, seed=2, initial_still_s=0.0, max_strides=strides)
+    second = simulate_walk("rectangle", second_s, rate_hz=RATE_HZ, seed=5, initial_still_s=second_still_s)
     acc, gyr, _ = corrupt(
         np.vstack([first.acc_b_mps2, second.acc_b_mps2]),
         np.vstack([first.gyr_b_radps, second.gyr_b_radps]),
@@ -63,6 +65,12 @@ def walk_rest_walk() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         seed=3,
     )
     return np.arange(acc.shape[0]) / RATE_HZ, acc, gyr
+
+
+@pytest.fixture(scope="module")
+def walk_rest_walk() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """8 strides, a rest of about 7 s, then a second walk (:func:`walk_then_rest`)."""
+    return walk_then_rest(14.0, 8, 10.0, 1.5)
 
 
 def stream(
