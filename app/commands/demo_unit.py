@@ -18,6 +18,7 @@ from collections.abc import Callable
 
 import numpy as np
 from footnav.app.commands.live import LiveOptions, live_session
+from footnav.app.feet import ONBOARD_TITLES
 from footnav.device.emulator.motion.gait import GaitTruth, simulate_walk
 from footnav.device.emulator.scripts import steps_from_truth, yaw_from_quat_wxyz
 from footnav.device.emulator.sensors.imu_errors import IMU_GRADES, corrupt
@@ -105,13 +106,10 @@ def run_unit_demo(
         error_m = final_error_m(truth, got[-1], output)
         print(f"{sum(len(b) for b in got)} {shown} received; distance walked {truth.distance_m:.2f} m (ground truth)")
         share = 100 * error_m / max(truth.distance_m, 1e-9)
-        onboard = output in ("ins", "steps")  # the emulator sends the true track as the unit's own solution
+        # the emulated unit's own solution is the emulator's truth
+        truth_sent = " (the emulated unit sends the true track as its own solution: this checks the decoding)"
         print(
             f"final position error: {error_m:.3f} m = {share:.2f} % of distance"
-            + (
-                " (the emulated unit sends the true track as its own solution: this checks the decoding)"
-                if onboard
-                else ""
-            )
+            + (truth_sent if output in ONBOARD_TITLES else "")
         )
     return 0
