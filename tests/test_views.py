@@ -392,6 +392,18 @@ def test_without_a_display_the_session_is_saved_and_says_how_to_open_it(
     assert kinds(None, False) == ([], "Rerun output off (no viewer, no file)")
 
 
+def test_default_recording_names_do_not_clash(tmp_path: Path) -> None:
+    from datetime import datetime
+
+    from footnav.views.sinks import default_save_path
+
+    now = datetime(2026, 12, 8, 3, 4, 5)
+    first = default_save_path(now, tmp_path)
+    assert first.name == "footnav-20261208-030405.rrd"
+    first.touch()  # another session of the same second
+    assert default_save_path(now, tmp_path).name == "footnav-20261208-030405-2.rrd"
+
+
 def test_the_hint_names_the_rerun_of_this_install(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Without the environment activated ``rerun`` is not on PATH: the hint gives the command's path."""
     from footnav.views.sinks import open_hint, rerun_command, rerun_script
